@@ -1,0 +1,1 @@
+"""Devices: one Protocol per kind, transports, real drivers, and the simulated rig."""

@@ -1,0 +1,93 @@
+"""One ``typing.Protocol`` per device kind (DESIGN.md, Devices).
+
+Drivers take a transport at construction (never a port string), so tests can script the
+bytes. Everything that captures or switches goes through these four shapes; the simulated
+rig implements the same ones.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class CapturedFrame:
+    """What a camera delivered for one trigger: the file(s) as written and their metadata."""
+
+    paths: tuple[Path, ...]
+    exposure_s: float
+    iso: float
+    camera_serial: str
+    timestamp: str  # ISO 8601, UTC
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Spectrum:
+    """A spectrometer reading on the instrument's own wavelengths (not resampled)."""
+
+    wavelengths_nm: np.ndarray
+    values: np.ndarray
+    integration_time_s: float
+    dark_subtracted: bool
+    saturated: bool = False
+
+
+@runtime_checkable
+class Device(Protocol):
+    def describe(self) -> dict[str, Any]:
+        """Model, serial, firmware, transport — recorded in the session for provenance."""
+        ...
+
+    def close(self) -> None: ...
+
+
+@runtime_checkable
+class LightSource(Device, Protocol):
+    """A light with named channels (e.g. r, g, b, c, w) and named illuminations."""
+
+    channels: tuple[str, ...]
+    illuminations: Mapping[str, Mapping[str, float]]
+
+    def set_levels(self, levels: Mapping[str, float]) -> None:
+        """Set channel levels in [0, 1]; channels not named are switched off."""
+        ...
+
+    def set_illumination(self, name: str) -> None:
+        """Switch to a named illumination and wait its settle time."""
+        ...
+
+    def off(self) -> None: ...
+
+
+@runtime_checkable
+class Projector(Device, Protocol):
+    width: int
+    height: int
+
+    def show(self, image: np.ndarray) -> None:
+        """Show an (H, W) or (H, W, 3) image, float in [0, 1] or uint8, full screen."""
+        ...
+
+    def blank(self) -> None: ...
+
+
+@runtime_checkable
+class Camera(Device, Protocol):
+    def capture(self, out_dir: Path, stem: str) -> CapturedFrame:
+        """Trigger, download the RAW file(s) into ``out_dir`` named from ``stem``."""
+        ...
+
+
+@runtime_checkable
+class Spectrometer(Device, Protocol):
+    def measure_dark(self) -> Spectrum: ...
+
+    def measure(self) -> Spectrum:
+        """One (averaged, dark-subtracted if a dark was taken) spectrum."""
+        ...

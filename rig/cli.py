@@ -1,0 +1,97 @@
+"""`rig` entry point: global options, subcommand dispatch, one-line errors."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+from collections.abc import Sequence
+
+from rich.console import Console
+from rich.logging import RichHandler
+
+from calibration.errors import RigError
+from rig import __version__
+
+# Subcommand -> module in rig.commands exposing ``add_parser(subparsers)``.
+COMMANDS: tuple[str, ...] = (
+    "demo",
+    "devices",
+    "calibrate",
+    "capture",
+    "session",
+    "reconstruct",
+    "relight",
+    "evaluate",
+)
+
+log = logging.getLogger("rig")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="rig",
+        description="Spectral multi-view inverse rendering with an RGB camera and an LED light.",
+    )
+    parser.add_argument("--version", action="version", version=f"spectral-rig {__version__}")
+    parser.add_argument(
+        "-v", "--verbose", action="count", default=0, help="more logging (-vv for debug)"
+    )
+    parser.add_argument(
+        "--debug", action="store_true", help="show tracebacks and debug logging on errors"
+    )
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMANDS:
+        module = importlib.import_module(f"rig.commands.{name}")
+        module.add_parser(subparsers)
+    return parser
+
+
+def configure_logging(verbosity: int, debug: bool) -> None:
+    level = logging.WARNING
+    if verbosity == 1:
+        level = logging.INFO
+    elif verbosity >= 2 or debug:
+        level = logging.DEBUG
+    logging.basicConfig(
+        level=level,
+        format="%(name)s: %(message)s",
+        handlers=[RichHandler(console=Console(stderr=True), show_path=False)],
+        force=True,
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    configure_logging(args.verbose, args.debug)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    err = Console(stderr=True)
+    try:
+        result = args.func(args)
+        return int(result or 0)
+    except RigError as error:
+        if args.debug:
+            err.print_exception()
+        err.print(f"[bold red]error:[/] {error}", highlight=False, markup=True)
+        return 2
+    except KeyboardInterrupt:
+        err.print("[yellow]interrupted[/]")
+        return 130
+    except Exception as error:
+        if args.debug:
+            err.print_exception()
+        else:
+            err.print(
+                f"[bold red]internal error:[/] {type(error).__name__}: {error} "
+                "— run again with --debug for the traceback and report it",
+                highlight=False,
+            )
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""One module per `rig` subcommand; each exposes ``add_parser(subparsers)``."""
