@@ -24,6 +24,7 @@ COMMANDS: tuple[str, ...] = (
     "reconstruct",
     "relight",
     "evaluate",
+    "board",
 )
 
 log = logging.getLogger("rig")
@@ -69,7 +70,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    err = Console(stderr=True)
+    err = Console(stderr=True, soft_wrap=True)
     try:
         result = args.func(args)
         return int(result or 0)
