@@ -1,0 +1,144 @@
+"""2-D spectral reflectance estimation from K illuminations × RGB (regularised least squares).
+
+Per pixel p, with response matrices ``A_k = Cᵀ diag(L_k)`` (times any known shading) and the
+basis ``r = B α``::
+
+    minimise_α  Σ_k ‖y_pk − A_k B α‖²  +  λ ‖D B α‖²
+
+where D is the second-difference operator (paper eq. 8). λ is *relative*:
+``λ = smoothness · tr(Σ_k (A_k B)ᵀ A_k B) / tr((D B)ᵀ D B)``, so the same ``smoothness`` works
+whatever the units of the light and the exposure. Without per-pixel weights the normal equations
+are solved once and applied to every pixel as one (N_b × 3K) matrix; with per-pixel shading or
+missing (NaN) values each pixel gets its own small N_b × N_b system, solved in batches.
+This is the paper's "MVS + per-pixel estimation" baseline and the optimiser's initial guess.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from calibration.basis import SpectralBasis
+from calibration.errors import RigError
+from calibration.spectra import second_difference_matrix
+
+DEFAULT_SMOOTHNESS = 0.1
+"""Relative weight; robust with ~1 % camera noise (see calibration.selection for tuning)."""
+BATCH = 65536
+
+
+def response_matrices(camera: np.ndarray, spds: list[np.ndarray] | np.ndarray) -> np.ndarray:
+    """``A_k = Cᵀ diag(L_k)`` for every SPD: (K, 3, N_λ)."""
+    c = np.asarray(camera, dtype=float)
+    lights = np.atleast_2d(np.asarray(spds, dtype=float))
+    if c.ndim != 2 or c.shape[1] != 3 or lights.shape[1] != c.shape[0]:
+        raise RigError(
+            f"camera {c.shape} and light SPDs {lights.shape} are not on the same grid",
+            "resample both onto the spectral grid (N_λ, 3) and (K, N_λ)",
+        )
+    return np.einsum("ln,kl->knl", c, lights)
+
+
+def _check(rgb: np.ndarray, resp: np.ndarray, basis: SpectralBasis) -> None:
+    if resp.ndim != 3 or resp.shape[1] != 3 or resp.shape[2] != basis.B.shape[0]:
+        raise RigError(
+            f"response matrices have shape {resp.shape}, expected (K, 3, {basis.B.shape[0]})",
+            "build them with calibration.estimation.response_matrices on the basis' grid",
+        )
+    if rgb.ndim != 3 or rgb.shape[1:] != resp.shape[:2]:
+        raise RigError(
+            f"RGB observations have shape {rgb.shape}, expected (P, {resp.shape[0]}, 3)",
+            "give one RGB triple per pixel and illumination",
+        )
+
+
+def smoothness_gram(basis: SpectralBasis) -> np.ndarray:
+    """(D B)ᵀ (D B): the spectral smoothness penalty in basis weights."""
+    db = second_difference_matrix(basis.B.shape[0]) @ basis.B
+    return db.T @ db
+
+
+def estimation_matrix(
+    resp: np.ndarray, basis: SpectralBasis, smoothness: float = DEFAULT_SMOOTHNESS
+) -> np.ndarray:
+    """The linear estimator W (N_b, 3K): ``α = W y`` with y the K RGB triples stacked."""
+    m = (resp @ basis.B).reshape(-1, basis.n_components)  # (3K, N_b)
+    gram = m.T @ m
+    smooth = smoothness_gram(basis)
+    lam = smoothness * np.trace(gram) / np.trace(smooth)
+    lhs = gram + lam * smooth + 1e-12 * np.trace(gram) * np.eye(gram.shape[0])
+    return np.linalg.solve(lhs, m.T)
+
+
+def estimate_reflectance(
+    rgb: np.ndarray,
+    response_matrices: np.ndarray,
+    basis: SpectralBasis,
+    smoothness: float = DEFAULT_SMOOTHNESS,
+    *,
+    fit_scale: bool = False,
+    shading: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Reflectance per pixel from ``rgb`` (P, K, 3) under ``response_matrices`` (K, 3, N_λ).
+
+    ``shading`` (P, K), optional: a per-pixel, per-illumination factor multiplying the response
+    (0 = not observed). NaN entries in ``rgb`` are missing values (saturated/masked) and are
+    ignored. Pixels with no usable observation get NaN. With ``fit_scale`` the overall scale is
+    treated as unknown (unknown shading or exposure) and each reflectance is normalised to a
+    maximum of 1. Returns ``(alpha (P, N_b), reflectance (P, N_λ))``.
+    """
+    y = np.asarray(rgb, dtype=float)
+    resp = np.asarray(response_matrices, dtype=float)
+    _check(y, resp, basis)
+    missing = ~np.isfinite(y)
+    if shading is None and not missing.any():
+        w = estimation_matrix(resp, basis, smoothness)
+        alpha = y.reshape(y.shape[0], -1) @ w.T
+    else:
+        alpha = _estimate_weighted(y, resp, basis, smoothness, shading, missing)
+    if fit_scale:
+        refl = basis.reconstruct(alpha)
+        scale = np.max(refl, axis=1, keepdims=True)
+        scale[~(scale > 0)] = np.nan
+        alpha = alpha / scale
+    return alpha, basis.reconstruct(alpha)
+
+
+def _estimate_weighted(
+    y: np.ndarray,
+    resp: np.ndarray,
+    basis: SpectralBasis,
+    smoothness: float,
+    shading: np.ndarray | None,
+    missing: np.ndarray,
+) -> np.ndarray:
+    """Per-pixel normal equations (P small N_b × N_b systems), solved in batches."""
+    p, k, _ = y.shape
+    if shading is None:
+        s = np.ones((p, k))
+    else:
+        s = np.asarray(shading, dtype=float)
+        if s.shape != (p, k) or not np.all(np.isfinite(s)):
+            raise RigError(
+                f"shading has shape {s.shape} (or NaN), expected finite ({p}, {k})",
+                "give one shading factor per pixel and illumination (0 = not observed)",
+            )
+    m = resp @ basis.B  # (K, 3, N_b)
+    smooth = smoothness_gram(basis)
+    tr_smooth = np.trace(smooth)
+    nb = basis.n_components
+    alpha = np.full((p, nb), np.nan)
+    for start in range(0, p, BATCH):
+        sl = slice(start, start + BATCH)
+        weight = np.where(missing[sl], 0.0, 1.0) * s[sl][:, :, None]  # (b, K, 3)
+        yy = np.where(missing[sl], 0.0, y[sl])
+        gram = np.einsum("bkn,kni,knj->bij", weight**2, m, m)
+        rhs = np.einsum("bkn,kni->bi", weight * yy, m)
+        tr = np.trace(gram, axis1=1, axis2=2)
+        ok = tr > 0
+        lam = smoothness * tr / tr_smooth
+        lhs = gram + lam[:, None, None] * smooth + (1e-12 * tr)[:, None, None] * np.eye(nb)
+        lhs[~ok] = np.eye(nb)
+        sol = np.linalg.solve(lhs, rhs[..., None])[..., 0]
+        sol[~ok] = np.nan
+        alpha[sl] = sol
+    return alpha

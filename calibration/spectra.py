@@ -1,0 +1,184 @@
+"""Validation and resampling of measured spectra onto the spectral grid.
+
+Every spectrum entering spectral-rig (a spectrometer export, a camera sensitivity table, a
+colour-science dataset) goes through :func:`resample`, so one place decides what counts as a
+valid spectrum and how it is brought onto the grid:
+
+* wavelengths must be finite, strictly increasing (no duplicates) and cover the grid;
+* values must be finite; with ``nonnegative=True`` (power, sensitivity, reflectance) values below
+  ``-5 %`` of the peak are an error, smaller negatives are dark-subtraction noise and become 0;
+* interpolation is colour-science's: :class:`colour.MultiSpectralDistributions` ``.align`` with
+  its default interpolator (Sprague 1880 for evenly spaced data, cubic spline otherwise);
+* data much denser than the grid (every step ≤ a quarter of the grid step, e.g. a spectrometer's
+  0.3–1 nm pixels) is first box-averaged over
+  one grid step, which is what a 10 nm-bandwidth measurement would record and keeps pixel noise
+  out of the resampled spectrum;
+* extrapolation happens only when asked (``extrapolate=True``) and is colour-science's constant
+  extrapolation (edge value held).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import colour
+import numpy as np
+import numpy.typing as npt
+
+from calibration.errors import RigError
+from calibration.grid import DEFAULT_GRID, SpectralGrid
+
+NEGATIVE_TOLERANCE = 0.05
+"""Negative values down to this fraction of the peak are treated as noise and clipped to 0."""
+
+MIN_SAMPLES = 4
+
+
+def validate_spectrum(
+    wavelengths_nm: npt.ArrayLike,
+    values: npt.ArrayLike,
+    *,
+    source: str = "spectrum",
+    nonnegative: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Check a sampled spectrum and return ``(wavelengths (M,), values (M, k))`` as floats.
+
+    Raises :class:`RigError` naming ``source`` for every problem a measured file can have.
+    Small negative values (noise) are clipped to zero when ``nonnegative``.
+    """
+    try:
+        w = np.asarray(wavelengths_nm, dtype=float)
+        v = np.asarray(values, dtype=float)
+    except (TypeError, ValueError) as error:
+        raise RigError(
+            f"{source}: wavelengths or values are not numbers ({error})",
+            "check that every row holds numeric values",
+        ) from error
+    if w.ndim != 1:
+        raise RigError(f"{source}: wavelengths must be one column", "give one wavelength per row")
+    if v.ndim == 1:
+        v = v[:, None]
+    if v.ndim != 2 or v.shape[0] != w.size:
+        raise RigError(
+            f"{source}: {w.size} wavelengths but values of shape {v.shape}",
+            "give one row of values per wavelength",
+        )
+    if w.size < MIN_SAMPLES:
+        raise RigError(
+            f"{source}: only {w.size} samples",
+            f"a spectrum needs at least {MIN_SAMPLES} wavelengths",
+        )
+    if not np.all(np.isfinite(w)):
+        raise RigError(f"{source}: wavelengths contain NaN or inf", "remove or fix those rows")
+    steps = np.diff(w)
+    if np.any(steps == 0):
+        dup = w[1:][steps == 0][0]
+        raise RigError(
+            f"{source}: duplicate wavelength {dup:g} nm",
+            "keep one row per wavelength (average repeated measurements first)",
+        )
+    if np.any(steps < 0):
+        bad = w[1:][steps < 0][0]
+        raise RigError(
+            f"{source}: wavelengths are not increasing (at {bad:g} nm)",
+            "sort the rows by wavelength",
+        )
+    if not np.all(np.isfinite(v)):
+        row = int(np.argwhere(~np.isfinite(v))[0, 0])
+        raise RigError(
+            f"{source}: value is NaN or inf at {w[row]:g} nm",
+            "re-export the measurement or remove the broken rows",
+        )
+    if nonnegative:
+        peak = np.max(np.abs(v), axis=0)
+        if np.any(peak == 0):
+            raise RigError(f"{source}: a column is all zeros", "check the measurement/export")
+        low = v < -NEGATIVE_TOLERANCE * peak
+        if np.any(low):
+            row, col = (int(i) for i in np.argwhere(low)[0])
+            raise RigError(
+                f"{source}: negative power/sensitivity {v[row, col]:g} at {w[row]:g} nm "
+                f"(column {col + 1})",
+                "subtract the dark spectrum correctly or re-measure; only noise-level negatives "
+                f"(> -{NEGATIVE_TOLERANCE:.0%} of the peak) are accepted",
+            )
+        v = np.clip(v, 0.0, None)
+    return w, v
+
+
+def _box_average(w: np.ndarray, v: np.ndarray, width: float) -> np.ndarray:
+    """Average ``v`` over ``[w - width/2, w + width/2]`` at every sample (trapezoid rule)."""
+    cum = np.concatenate(
+        [np.zeros((1, v.shape[1])), np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(w)[:, None], 0)]
+    )
+
+    def integral(x: np.ndarray) -> np.ndarray:
+        return np.stack([np.interp(x, w, cum[:, j]) for j in range(v.shape[1])], axis=1)
+
+    lo = np.clip(w - width / 2, w[0], w[-1])
+    hi = np.clip(w + width / 2, w[0], w[-1])
+    return (integral(hi) - integral(lo)) / (hi - lo)[:, None]
+
+
+def resample(
+    wavelengths_nm: npt.ArrayLike,
+    values: npt.ArrayLike,
+    grid: SpectralGrid = DEFAULT_GRID,
+    *,
+    source: str = "spectrum",
+    nonnegative: bool = True,
+    extrapolate: bool = False,
+    band_average: bool = True,
+) -> np.ndarray:
+    """Resample a spectrum onto ``grid`` with colour-science.
+
+    ``values`` of shape (M,) gives (N_λ,); (M, k) gives (N_λ, k). ``source`` names the file or
+    store entry in error messages. ``band_average=False`` turns off the box average of dense
+    data (for tabulated functions such as colour-matching functions that must be point-sampled).
+    See the module docstring for the rules.
+    """
+    w, v = validate_spectrum(wavelengths_nm, values, source=source, nonnegative=nonnegative)
+    squeeze = np.ndim(values) == 1
+    target = grid.wavelengths
+    tol = 1e-6
+    if not extrapolate and (w[0] > target[0] + tol or w[-1] < target[-1] - tol):
+        raise RigError(
+            f"{source}: covers {w[0]:g}–{w[-1]:g} nm but the grid needs "
+            f"{target[0]:g}–{target[-1]:g} nm",
+            "measure/export the full range, or choose a narrower grid in the profile",
+        )
+    if band_average and float(np.max(np.diff(w))) <= grid.step_nm / 4:
+        v = _box_average(w, v, grid.step_nm)
+    if w.size == target.size and np.allclose(w, target):
+        out = v.copy()
+    else:
+        msds = colour.MultiSpectralDistributions(v, w, labels=[f"c{j}" for j in range(v.shape[1])])
+        shape = colour.SpectralShape(grid.start_nm, grid.stop_nm, grid.step_nm)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            aligned = msds.copy().align(
+                shape, extrapolator_kwargs={"method": "Constant", "left": None, "right": None}
+            )
+        out = np.asarray(aligned.values, dtype=float)
+        # align() samples the aligned domain; pick exactly the grid wavelengths.
+        idx = np.searchsorted(aligned.wavelengths, target - tol)
+        out = out[idx]
+    if nonnegative:
+        out = np.clip(out, 0.0, None)  # interpolation ringing around narrow LED peaks
+    return out[:, 0] if squeeze else out
+
+
+def second_difference_matrix(n: int) -> np.ndarray:
+    """The (n-2, n) second-difference operator D: ``(D r)_i = r_i - 2 r_{i+1} + r_{i+2}``.
+
+    Only interior rows are kept, so a straight line (any constant or linear spectrum) has zero
+    penalty; this is the paper's spectral smoothness operator (eq. 8) without boundary rows.
+    """
+    if n < 3:
+        raise RigError(f"second difference needs at least 3 samples, got {n}", "use a finer grid")
+    d = np.zeros((n - 2, n))
+    idx = np.arange(n - 2)
+    d[idx, idx] = 1.0
+    d[idx, idx + 1] = -2.0
+    d[idx, idx + 2] = 1.0
+    return d

@@ -1,0 +1,385 @@
+"""The calibration store: a directory of spectrum CSVs plus a YAML index with provenance.
+
+Layout (DESIGN.md, "Calibration store")::
+
+    STORE/
+      index.yaml                  format, then one record per entry *version*
+      lights/bulb__r.v1.csv       wavelength_nm,power
+      cameras/canon...v1.csv      wavelength_nm,R,G,B
+
+Spectra are stored at their measured sampling and resampled on read, so the store is
+independent of the grid. Adding a spectrum under an existing name creates the next version;
+old versions stay on disk and in the index until removed explicitly. The index is rewritten
+atomically (temporary file, fsync, rename).
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as _dt
+import hashlib
+import os
+import re
+import shutil
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import yaml
+
+from calibration import defaults
+from calibration.errors import RigError
+from calibration.grid import DEFAULT_GRID, SpectralGrid
+from calibration.spectra import resample, validate_spectrum
+
+FORMAT = "spectral-rig-calibration/1"
+ENV_STORE = "SPECTRAL_RIG_STORE"
+INDEX = "index.yaml"
+Kind = Literal["light", "camera"]
+KINDS: tuple[str, ...] = ("light", "camera")
+PROVENANCE_KEYS = (
+    "source",
+    "device",
+    "serial",
+    "date",
+    "instrument",
+    "integration_time_ms",
+    "notes",
+)
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+\- /]*$")
+
+
+@dataclass
+class Entry:
+    """One version of one named spectrum."""
+
+    name: str
+    kind: str
+    version: int
+    file: str
+    added: str
+    sha256: str
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def columns(self) -> list[str]:
+        return ["power"] if self.kind == "light" else ["R", "G", "B"]
+
+
+def default_store_path() -> Path:
+    """``$SPECTRAL_RIG_STORE`` or ``~/.local/share/spectral-rig/calibration``."""
+    env = os.environ.get(ENV_STORE)
+    return Path(env).expanduser() if env else Path.home() / ".local/share/spectral-rig/calibration"
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", encoding="utf-8", newline="") as handle:
+        handle.write(text)
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(tmp, path)
+
+
+def write_spectrum_csv(
+    path: Path, wavelengths: np.ndarray, values: np.ndarray, columns: list[str]
+) -> None:
+    """CSV with header ``wavelength_nm,<columns>`` (written atomically)."""
+    lines = [",".join(["wavelength_nm", *columns])]
+    for w, row in zip(wavelengths, np.atleast_2d(values.T).T, strict=True):
+        lines.append(",".join([f"{w:.6g}", *(f"{x:.9g}" for x in np.atleast_1d(row))]))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _atomic_write(path, "\n".join(lines) + "\n")
+
+
+def read_spectrum_csv(path: Path, columns: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Read a store CSV, checking its header; returns (wavelengths (M,), values (M, k))."""
+    try:
+        with open(path, newline="", encoding="utf-8") as handle:
+            rows = list(csv.reader(handle))
+    except OSError as error:
+        raise RigError(
+            f"cannot read calibration file {path}: {error}", "restore it or re-import"
+        ) from error
+    expected = ["wavelength_nm", *columns]
+    if not rows or [c.strip() for c in rows[0]] != expected:
+        raise RigError(
+            f"calibration file {path} has header {rows[0] if rows else '(empty)'}",
+            f"the header must be {','.join(expected)}",
+        )
+    try:
+        data = np.array([[float(x) for x in r] for r in rows[1:] if r], dtype=float)
+    except ValueError as error:
+        raise RigError(
+            f"calibration file {path}: non-numeric value ({error})", "fix or re-import it"
+        ) from error
+    if data.ndim != 2 or data.shape[1] != len(expected):
+        raise RigError(
+            f"calibration file {path}: rows do not all have {len(expected)} values",
+            "fix or re-import it",
+        )
+    w, v = validate_spectrum(data[:, 0], data[:, 1:], source=str(path))
+    return w, v
+
+
+class CalibrationStore:
+    """A calibration store directory (see module docstring)."""
+
+    def __init__(self, root: str | Path) -> None:
+        self.root = Path(root).expanduser()
+        self._entries: list[Entry] = self._read_index()
+
+    # -- index -----------------------------------------------------------------------------
+    @property
+    def index_path(self) -> Path:
+        return self.root / INDEX
+
+    def _read_index(self) -> list[Entry]:
+        if not self.index_path.exists():
+            return []
+        try:
+            data = yaml.safe_load(self.index_path.read_text(encoding="utf-8")) or {}
+        except yaml.YAMLError as error:
+            raise RigError(
+                f"calibration index {self.index_path} is not valid YAML: {error}",
+                "fix the file or restore it from a session's calibration/ snapshot",
+            ) from error
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            raise RigError(
+                f"{self.index_path} is not a spectral-rig calibration index (format: {FORMAT})",
+                "point --store at a directory made by `rig calibrate init-store`",
+            )
+        entries = []
+        for i, record in enumerate(data.get("entries") or []):
+            try:
+                entry = Entry(**record)
+            except TypeError as error:
+                raise RigError(
+                    f"{self.index_path}: entry {i + 1} is malformed ({error})",
+                    "each entry needs name, kind, version, file, added, sha256, provenance",
+                ) from error
+            if entry.kind not in KINDS:
+                raise RigError(
+                    f"{self.index_path}: entry {entry.name!r} has kind {entry.kind!r}",
+                    "use light or camera",
+                )
+            entries.append(entry)
+        return entries
+
+    def _write_index(self) -> None:
+        self.root.mkdir(parents=True, exist_ok=True)
+        data = {"format": FORMAT, "entries": [asdict(e) for e in self._entries]}
+        _atomic_write(self.index_path, yaml.safe_dump(data, sort_keys=False, allow_unicode=True))
+
+    # -- queries ---------------------------------------------------------------------------
+    def entries(self, kind: str | None = None, *, all_versions: bool = True) -> list[Entry]:
+        """Entries (every version by default; ``all_versions=False``: latest of each name)."""
+        out = [e for e in self._entries if kind is None or e.kind == kind]
+        if not all_versions:
+            latest: dict[str, Entry] = {}
+            for e in out:
+                if e.name not in latest or e.version > latest[e.name].version:
+                    latest[e.name] = e
+            out = list(latest.values())
+        return sorted(out, key=lambda e: (e.kind, e.name, e.version))
+
+    def names(self, kind: str | None = None) -> list[str]:
+        return [e.name for e in self.entries(kind, all_versions=False)]
+
+    def entry(self, name: str, version: int | None = None, kind: str | None = None) -> Entry:
+        """The entry ``name`` (latest version unless ``version``)."""
+        matches = [e for e in self._entries if e.name == name and (kind is None or e.kind == kind)]
+        if not matches:
+            known = ", ".join(self.names(kind)) or "(store is empty)"
+            raise RigError(
+                f"no {kind or 'calibration'} entry named {name!r} in {self.root}",
+                f"known entries: {known}; add one with `rig calibrate import` or "
+                "`rig calibrate init-store`",
+            )
+        if version is None:
+            return max(matches, key=lambda e: e.version)
+        for e in matches:
+            if e.version == version:
+                return e
+        raise RigError(
+            f"{name!r} has no version {version} in {self.root}",
+            "available versions: " + ", ".join(str(v) for v in sorted(e.version for e in matches)),
+        )
+
+    def read_native(self, entry: Entry) -> tuple[np.ndarray, np.ndarray]:
+        """An entry's spectrum at its stored sampling, after checking its file hash."""
+        path = self.root / entry.file
+        if not path.exists():
+            raise RigError(
+                f"calibration file {path} for {entry.name!r} v{entry.version} is missing",
+                "restore it or remove the entry",
+            )
+        if _sha256(path) != entry.sha256:
+            raise RigError(
+                f"calibration file {path} was modified after it was added (sha256 mismatch)",
+                "import the edited spectrum as a new version instead of editing files in place",
+            )
+        return read_spectrum_csv(path, entry.columns)
+
+    def light_spd(
+        self, name: str, grid: SpectralGrid = DEFAULT_GRID, version: int | None = None
+    ) -> np.ndarray:
+        """Light SPD (N_λ,) on ``grid``."""
+        entry = self.entry(name, version, kind="light")
+        w, v = self.read_native(entry)
+        return resample(
+            w, v[:, 0], grid, source=f"{self.root / entry.file} ({name} v{entry.version})"
+        )
+
+    def camera(
+        self, name: str, grid: SpectralGrid = DEFAULT_GRID, version: int | None = None
+    ) -> np.ndarray:
+        """Camera sensitivity (N_λ, 3) on ``grid``."""
+        entry = self.entry(name, version, kind="camera")
+        w, v = self.read_native(entry)
+        return resample(w, v, grid, source=f"{self.root / entry.file} ({name} v{entry.version})")
+
+    # -- changes ---------------------------------------------------------------------------
+    def _add(
+        self,
+        name: str,
+        kind: str,
+        wavelengths: np.ndarray,
+        values: np.ndarray,
+        provenance: Mapping[str, Any],
+    ) -> Entry:
+        if not _NAME.match(name) or ".." in name:
+            raise RigError(
+                f"invalid calibration entry name {name!r}",
+                "use letters, digits and . _ - + / (e.g. bulb/r, LED1, canon-5d2)",
+            )
+        clash = [e for e in self._entries if e.name == name and e.kind != kind]
+        if clash:
+            raise RigError(f"{name!r} already names a {clash[0].kind} entry", "choose another name")
+        columns = ["power"] if kind == "light" else ["R", "G", "B"]
+        w, v = validate_spectrum(wavelengths, values, source=f"{kind} {name!r}")
+        if v.shape[1] != len(columns):
+            raise RigError(
+                f"{kind} {name!r} has {v.shape[1]} value columns",
+                f"a {kind} needs {len(columns)} ({', '.join(columns)})",
+            )
+        version = 1 + max((e.version for e in self._entries if e.name == name), default=0)
+        slug = re.sub(r"[^A-Za-z0-9._+-]", "-", name.replace("/", "__").replace(" ", "_"))
+        rel = f"{kind}s/{slug}.v{version}.csv"
+        path = self.root / rel
+        if path.exists():
+            raise RigError(f"{path} exists but is not in the index", "move it away, then add again")
+        write_spectrum_csv(path, w, v, columns)
+        prov = {k: v for k, v in dict(provenance).items() if v is not None}
+        entry = Entry(
+            name=name,
+            kind=kind,
+            version=version,
+            file=rel,
+            added=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            sha256=_sha256(path),
+            provenance=prov,
+        )
+        self._entries.append(entry)
+        self._write_index()
+        return entry
+
+    def add_light(
+        self,
+        name: str,
+        wavelengths_nm: np.ndarray,
+        power: np.ndarray,
+        provenance: Mapping[str, Any],
+    ) -> Entry:
+        """Add a light SPD; an existing name gets a new version (the old one is kept)."""
+        return self._add(
+            name, "light", np.asarray(wavelengths_nm), np.asarray(power).reshape(-1, 1), provenance
+        )
+
+    def add_camera(
+        self, name: str, wavelengths_nm: np.ndarray, rgb: np.ndarray, provenance: Mapping[str, Any]
+    ) -> Entry:
+        """Add a camera sensitivity (M, 3); an existing name gets a new version."""
+        return self._add(name, "camera", np.asarray(wavelengths_nm), np.asarray(rgb), provenance)
+
+    def remove(self, name: str, version: int | None = None) -> list[Entry]:
+        """Remove one version (or every version) of ``name`` and its files."""
+        self.entry(name, version)
+        gone = [
+            e for e in self._entries if e.name == name and (version is None or e.version == version)
+        ]
+        self._entries = [e for e in self._entries if e not in gone]
+        self._write_index()
+        for e in gone:
+            (self.root / e.file).unlink(missing_ok=True)
+        return gone
+
+    def copy_to(self, dest: str | Path) -> CalibrationStore:
+        """Snapshot the store into ``dest`` (for a capture session's ``calibration/``)."""
+        dest = Path(dest)
+        if dest.exists() and any(dest.iterdir()):
+            raise RigError(
+                f"{dest} already exists and is not empty", "snapshot into a new directory"
+            )
+        dest.mkdir(parents=True, exist_ok=True)
+        for e in self._entries:
+            target = dest / e.file
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(self.root / e.file, target)
+        shutil.copy2(self.index_path, dest / INDEX)
+        return CalibrationStore(dest)
+
+    @classmethod
+    def create_default(
+        cls, root: str | Path, grid: SpectralGrid = DEFAULT_GRID
+    ) -> CalibrationStore:
+        """A store holding the built-in defaults, each with its source in the provenance."""
+        store = cls(root)
+        if store._entries:
+            raise RigError(
+                f"{store.root} already holds a calibration store", "choose an empty directory"
+            )
+        today = _dt.date.today().isoformat()
+        for cam in defaults.camera_names():
+            w, rgb = defaults.camera_sensitivity_native(cam)
+            notes = "built-in default, normalised to max 1"
+            if w[0] > grid.start_nm or w[-1] < grid.stop_nm:
+                w, rgb = grid.wavelengths, defaults.camera_sensitivity(cam, grid)
+                notes += (
+                    f"; extended to {grid.start_nm:g}–{grid.stop_nm:g} nm (constant extrapolation)"
+                )
+            source = defaults.camera_source_description(cam)
+            store.add_camera(cam, w, rgb, {"source": source, "date": today, "notes": notes})
+        channels = defaults.rgbcw_channel_spds(grid)
+        for key, spd in channels.items():
+            store.add_light(
+                f"bulb/{key}",
+                grid.wavelengths,
+                spd,
+                {
+                    "source": defaults.BULB_CHANNEL_MODELS[key].describe(),
+                    "date": today,
+                    "notes": "MODEL, not a measurement: replace with a spectrometer measurement. "
+                    "Scaled so a white reflector at 0.5 m under all channels reads 0.5 "
+                    f"(camera {defaults.DEFAULT_CAMERA})",
+                },
+            )
+        for name, levels in defaults.default_illuminations().items():
+            store.add_light(
+                name,
+                grid.wavelengths,
+                defaults.illumination_spd(levels, channels),
+                {
+                    "source": "mix of bulb channel models",
+                    "mix": dict(levels),
+                    "date": today,
+                    "notes": "MODEL",
+                },
+            )
+        return store
