@@ -1,0 +1,1 @@
+"""Camera drivers: tethered (gphoto2), folder-watch, and hand-held import."""

@@ -1,0 +1,1 @@
+"""Light drivers: each implements only its wire format on top of ``LightBase``."""

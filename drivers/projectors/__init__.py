@@ -1,0 +1,1 @@
+"""Projector drivers and the patterns they show."""

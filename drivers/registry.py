@@ -1,0 +1,251 @@
+"""Backends by name (as python-seabreeze picks backends): a profile section names its
+``driver`` and this module builds it with its transport.
+
+``driver: sim`` is resolved by the capture code (the simulated rig), not here.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import logging
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from calibration.errors import RigError
+from drivers.protocols import Camera, LightSource, Projector, Spectrometer
+from drivers.transports import open_transport, redact
+from drivers.transports.base import Transport
+
+log = logging.getLogger(__name__)
+
+# (vid, pid) -> (driver, what it is), for `rig devices`.
+USB_IDS: dict[tuple[int, int], tuple[str, str]] = {
+    (0x0403, 0x6001): ("enttec-dmx-pro", "FTDI serial (Enttec DMX USB Pro and compatibles)"),
+    (0x16C0, 0x05DC): ("udmx", "uDMX (anyma.ch) USB DMX"),
+    (0x10CF, 0x8062): ("velleman-k8062", "Velleman K8062 / VM116 DMX"),
+    (0x2341, 0x0043): ("rgbcw-serial", "Arduino Uno (rgbcw-text firmware?)"),
+    (0x2341, 0x0058): ("rgbcw-serial", "Arduino Nano Every (rgbcw-text firmware?)"),
+    (0x1A86, 0x7523): ("rgbcw-serial", "CH340 USB serial (Arduino clone, rgbcw-text firmware?)"),
+    (0x10C4, 0xEA60): ("rgbcw-serial", "CP210x USB serial (ESP32, rgbcw-text firmware?)"),
+    (0x2E8A, 0x000A): ("rgbcw-serial", "Raspberry Pi Pico (rgbcw-text firmware?)"),
+}
+OCEAN_VID = 0x2457
+
+DEFAULT_TRANSPORTS: dict[str, dict[str, Any]] = {
+    "enttec-dmx-pro": {"type": "serial", "baudrate": 57600},
+    "dmx": {"type": "serial", "baudrate": 57600},
+    "rgbcw-serial": {"type": "serial", "baudrate": 115200},
+    "udmx": {"type": "usb", "vid": 0x16C0, "pid": 0x05DC},
+    "velleman-k8062": {"type": "hid", "vid": 0x10CF, "pid": 0x8062},
+    "magic-home": {"type": "tcp", "port": 5577},
+}
+
+
+def _section(spec: Mapping[str, Any], kind: str) -> tuple[str, dict[str, Any]]:
+    if not isinstance(spec, Mapping):
+        raise RigError(
+            f"the {kind} section of the profile is not a mapping", "see docs/usage-drivers.md"
+        )
+    options = dict(spec)
+    driver = options.pop("driver", None)
+    if not driver:
+        raise RigError(
+            f"the {kind} section has no `driver:`",
+            f"name one of: {', '.join(list_driver_names(kind))}",
+        )
+    return str(driver), options
+
+
+def _transport_section(options: dict[str, Any]) -> dict[str, Any]:
+    """The section's ``transport:`` (``kind:`` read as ``type:``)."""
+    spec = dict(options.pop("transport", None) or {})
+    if "kind" in spec:
+        spec["type"] = spec.pop("kind")
+    return spec
+
+
+def _transport(driver: str, options: dict[str, Any]) -> Transport:
+    spec = {**DEFAULT_TRANSPORTS.get(driver, {}), **_transport_section(options)}
+    if "type" not in spec:
+        raise RigError(f"driver {driver} needs a `transport:` section", "see docs/usage-drivers.md")
+    return open_transport(spec, where=f"{driver}.transport")
+
+
+def _build(
+    kind: str, driver: str, cls: Callable[..., Any], options: dict[str, Any], *args: Any
+) -> Any:
+    """``cls(*args, **options)``, with unknown or missing profile keys reported as such."""
+    log.debug("opening %s driver %s with %s", kind, driver, redact(options))
+    try:
+        inspect.signature(cls).bind(*args, **options)
+    except TypeError as error:
+        raise RigError(
+            f"{kind} driver {driver!r}: unexpected or missing setting ({error})",
+            "see docs/usage-drivers.md for the keys this driver takes",
+        ) from error
+    return cls(*args, **options)
+
+
+def _with_transport(cls_path: str) -> Callable[..., Any]:
+    def make(driver: str, options: dict[str, Any]) -> Any:
+        module, _, name = cls_path.rpartition(".")
+        cls = getattr(importlib.import_module(module), name)
+        transport = _transport(driver, options)
+        try:
+            return _build("light", driver, cls, options, transport)
+        except BaseException:
+            transport.close()
+            raise
+
+    return make
+
+
+def _tuya(driver: str, options: dict[str, Any]) -> Any:
+    from drivers.lights.tuya import TuyaBulb, open_bulb
+
+    host = _transport_section(options).get("host")
+    if host and "address" not in options:
+        options["address"] = host
+    try:
+        bulb = open_bulb(
+            options.pop("device_id"),
+            options.pop("address"),
+            options.pop("local_key"),
+            options.pop("version", 3.3),
+        )
+    except KeyError as error:
+        raise RigError(
+            f"tuya light needs {error.args[0]}", "get it with `python -m tinytuya wizard`"
+        ) from error
+    options.setdefault("address", str(bulb.address))
+    return _build("light", driver, TuyaBulb, options, bulb)
+
+
+def _manual(driver: str, options: dict[str, Any]) -> Any:
+    from drivers.lights.manual import ManualLight
+
+    return _build("light", driver, ManualLight, options)
+
+
+LIGHTS: dict[str, Callable[[str, dict[str, Any]], Any]] = {
+    "enttec-dmx-pro": _with_transport("drivers.lights.enttec.EnttecDmxPro"),
+    "dmx": _with_transport("drivers.lights.enttec.EnttecDmxPro"),  # the common interface
+    "rgbcw-serial": _with_transport("drivers.lights.rgbcw_serial.RgbcwSerialLight"),
+    "udmx": _with_transport("drivers.lights.udmx.UDmx"),
+    "velleman-k8062": _with_transport("drivers.lights.k8062.VellemanK8062"),
+    "magic-home": _with_transport("drivers.lights.magichome.MagicHomeLight"),
+    "tuya": _tuya,
+    "manual": _manual,
+}
+
+
+def _gphoto2(driver: str, options: dict[str, Any]) -> Any:
+    """``transport: {kind: usb, port: "usb:001,005"}`` or ``port:`` picks one camera;
+    ``settings`` (the profile's camera_settings) are applied to the camera."""
+    from drivers.cameras.gphoto2_camera import Gphoto2Camera
+
+    port = _transport_section(options).get("port")
+    if port and "port" not in options:
+        options["port"] = port
+    return _build("camera", driver, Gphoto2Camera, options)
+
+
+def _file_camera(cls_path: str) -> Callable[[str, dict[str, Any]], Any]:
+    """Cameras that only find files: the profile's exposure/ISO are their metadata fallback."""
+
+    def make(driver: str, options: dict[str, Any]) -> Any:
+        module, _, name = cls_path.rpartition(".")
+        cls = getattr(importlib.import_module(module), name)
+        settings = options.pop("settings", None) or {}
+        for key in ("exposure_s", "iso"):
+            if key in settings:
+                options.setdefault(key, settings[key])
+        _transport_section(options)
+        return _build("camera", driver, cls, options)
+
+    return make
+
+
+CAMERAS: dict[str, Callable[[str, dict[str, Any]], Any]] = {
+    "gphoto2": _gphoto2,
+    "folder-watch": _file_camera("drivers.cameras.folder_watch.FolderWatchCamera"),
+    "handheld-import": _file_camera("drivers.cameras.handheld.HandheldImportCamera"),
+}
+
+
+def _pygame(driver: str, options: dict[str, Any]) -> Any:
+    from drivers.projectors.pygame_display import PygameProjector
+
+    if "size" in options:
+        options["size"] = tuple(options["size"])
+    return _build("projector", driver, PygameProjector, options)
+
+
+PROJECTORS: dict[str, Callable[[str, dict[str, Any]], Any]] = {"pygame": _pygame}
+
+
+def _seabreeze(driver: str, options: dict[str, Any]) -> Any:
+    from drivers.spectrometers.seabreeze_spectrometer import SeabreezeSpectrometer, open_seabreeze
+
+    device = open_seabreeze(options.pop("serial", None), options.pop("backend", None))
+    try:
+        return _build("spectrometer", driver, SeabreezeSpectrometer, options, device)
+    except BaseException:
+        device.close()
+        raise
+
+
+def _file_import(driver: str, options: dict[str, Any]) -> Any:
+    from drivers.spectrometers.file_import import FileImportSpectrometer
+
+    return _build("spectrometer", driver, FileImportSpectrometer, options)
+
+
+SPECTROMETERS: dict[str, Callable[[str, dict[str, Any]], Any]] = {
+    "seabreeze": _seabreeze,
+    "file-import": _file_import,
+}
+
+KINDS = {"light": LIGHTS, "camera": CAMERAS, "projector": PROJECTORS, "spectrometer": SPECTROMETERS}
+# Names per kind, read by profile validation (rig.profile.known_drivers).
+DRIVERS: dict[str, tuple[str, ...]] = {kind: tuple(sorted(t)) for kind, t in KINDS.items()}
+
+
+def list_driver_names(kind: str | None = None) -> list[str]:
+    """Driver names for one kind (light, camera, projector, spectrometer), or all of them."""
+    if kind is None:
+        return sorted({name for table in KINDS.values() for name in table})
+    return sorted(KINDS[kind])
+
+
+def _open(kind: str, spec: Mapping[str, Any]) -> Any:
+    driver, options = _section(spec, kind)
+    table = KINDS[kind]
+    if driver not in table:
+        extra = " (`sim` is handled by `rig capture`/`rig demo`)" if driver == "sim" else ""
+        raise RigError(
+            f"unknown {kind} driver {driver!r}{extra}",
+            f"use one of: {', '.join(sorted(table))}",
+        )
+    return table[driver](driver, options)
+
+
+def open_light(spec: Mapping[str, Any]) -> LightSource:
+    light: LightSource = _open("light", spec)
+    return light
+
+
+def open_camera(spec: Mapping[str, Any]) -> Camera:
+    camera: Camera = _open("camera", spec)
+    return camera
+
+
+def open_projector(spec: Mapping[str, Any]) -> Projector:
+    projector: Projector = _open("projector", spec)
+    return projector
+
+
+def open_spectrometer(spec: Mapping[str, Any]) -> Spectrometer:
+    spectrometer: Spectrometer = _open("spectrometer", spec)
+    return spectrometer

@@ -1,0 +1,1 @@
+"""Spectrometer drivers: seabreeze (Ocean) and vendor-file import."""
