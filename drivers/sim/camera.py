@@ -1,0 +1,282 @@
+"""Simulated RGB camera: renders the scene with the one forward model, adds sensor noise,
+mosaics (Bayer) and writes a real DNG.
+
+Per frame: linear image ``y`` (forward model, anti-aliased) -> raw
+``black + y · (white − black) · exposure_s · iso / 100`` (DESIGN.md's linear convention, read
+backwards) -> shot noise (Poisson in electrons) + read noise (Gaussian, DN) -> rounded, clipped
+to ``[0, white]`` (saturation is real) -> Bayer mosaic -> DNG. Geometry (primary hits, shadow
+rays) is cached per pose so several illuminations of one view cost one trace.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import zlib
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import colour
+import numpy as np
+
+from calibration.defaults import (
+    DEFAULT_CAMERA,
+    camera_sensitivity,
+    cie_illuminant,
+    colorchecker_reflectances,
+)
+from calibration.errors import RigError
+from calibration.grid import DEFAULT_GRID
+from calibration.spectra import resample
+from drivers.protocols import CapturedFrame
+from drivers.sim.dng import write_dng
+from drivers.sim.light import SimLight
+from drivers.sim.projector import SimProjector
+from drivers.sim.scene import Scene
+from reconstruct import forward, render
+from reconstruct.camera import Intrinsics, Pose
+from reconstruct.raycast import RayCaster
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """The ``camera`` section of a sim profile (defaults: a 640x480 14-bit RGGB camera)."""
+
+    width: int = 640
+    height: int = 480
+    focal_px: float = 800.0
+    black_level: int = 512
+    white_level: int = 16383
+    pattern: str = "RGGB"
+    exposure_s: float = 1.0
+    iso: float = 250.0
+    gain_e_per_dn: float = 1.0  # at ISO 100; halves per ISO doubling
+    read_noise_dn: float = 2.0
+    supersample: int = 2
+    normals: str = "smooth"
+    sensitivity: str = DEFAULT_CAMERA
+    make: str = "spectral-rig"
+    model: str = "SimCam 14-bit"
+    serial: str = "SIM-CAM-0001"
+
+    @classmethod
+    def from_mapping(
+        cls, data: Mapping[str, Any] | None, where: str = "sim.camera"
+    ) -> SensorConfig:
+        data = dict(data or {})
+        known = {f.name for f in fields(cls)}
+        unknown = set(data) - known
+        if unknown:
+            raise RigError(
+                f"{where}: unknown key(s) {', '.join(sorted(unknown))}",
+                f"use only {', '.join(sorted(known))}",
+            )
+        conf = cls(**data)
+        if conf.width % 2 or conf.height % 2 or conf.width < 32 or conf.height < 32:
+            raise RigError(
+                f"{where}: image size {conf.width}x{conf.height}",
+                "use even width and height of at least 32 pixels (Bayer mosaic, LibRaw minimum)",
+            )
+        if not (0 <= conf.black_level < conf.white_level <= 65535):
+            raise RigError(
+                f"{where}: black {conf.black_level} / white {conf.white_level}",
+                "use 0 <= black_level < white_level <= 65535",
+            )
+        if conf.exposure_s <= 0 or conf.iso <= 0:
+            raise RigError(f"{where}: exposure_s and iso must be positive")
+        return conf
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        return Intrinsics.pinhole(self.width, self.height, self.focal_px)
+
+
+def _cfa_channel(pattern: str, height: int, width: int) -> np.ndarray:
+    """Channel index (0 R, 1 G, 2 B) of every sensor pixel for a 2x2 pattern like ``RGGB``."""
+    code = np.array(["RGB".index(c) for c in pattern.upper()]).reshape(2, 2)
+    return np.tile(code, (height // 2, width // 2))
+
+
+def colour_matrix(sensitivity: np.ndarray) -> np.ndarray:
+    """DNG ColorMatrix1 (XYZ -> camera, D65) fitted on the ColorChecker by least squares."""
+    cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
+    xyz_bar = resample(cmfs.wavelengths, cmfs.values, DEFAULT_GRID, band_average=False)
+    d65 = cie_illuminant("D65")
+    refl = colorchecker_reflectances()[1]
+    xyz = refl @ (xyz_bar * d65[:, None])
+    cam = refl @ (sensitivity * d65[:, None])
+    M = np.linalg.lstsq(xyz, cam, rcond=None)[0].T  # cam = M xyz
+    white = M @ (xyz_bar * d65[:, None]).sum(axis=0)
+    return M / white.max()
+
+
+class SimCamera:
+    """Implements :class:`drivers.protocols.Camera`; the rig sets the pose per view."""
+
+    def __init__(
+        self,
+        scene: Scene,
+        light: SimLight,
+        projector: SimProjector | None,
+        sensor: SensorConfig | None = None,
+        seed: int = 0,
+        caster: RayCaster | None = None,
+    ) -> None:
+        self.scene = scene
+        self.light = light
+        self.projector = projector
+        self.sensor = sensor or SensorConfig()
+        self.intrinsics = self.sensor.intrinsics
+        self.seed = seed
+        self.sensitivity = camera_sensitivity(self.sensor.sensitivity)
+        self.caster = caster or RayCaster(scene.vertices, scene.faces)
+        self._vertex_normals = render.vertex_normals(scene.vertices, scene.faces)
+        self._color_matrix = colour_matrix(self.sensitivity)
+        self.pose = Pose.look_at(np.array([0.0, -0.5, 0.0]), np.zeros(3))
+        self._hits: tuple[bytes, render.ViewHits] | None = None
+        self._weights: dict[tuple[bytes, ...], np.ndarray] = {}
+        self._rgb: dict[bytes, np.ndarray] = {}
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "kind": "camera",
+            "model": f"{self.sensor.make} {self.sensor.model}",
+            "serial": self.sensor.serial,
+            "transport": "sim",
+            "resolution": [self.sensor.width, self.sensor.height],
+            "sensitivity": self.sensor.sensitivity,
+        }
+
+    def close(self) -> None:
+        self._hits = None
+        self._weights.clear()
+
+    def set_pose(self, pose: Pose) -> None:
+        self.pose = pose
+
+    def set_exposure(self, exposure_s: float | None = None, iso: float | None = None) -> None:
+        """Change shutter time and/or ISO for the following captures."""
+        changes: dict[str, float] = {}
+        if exposure_s is not None:
+            changes["exposure_s"] = float(exposure_s)
+        if iso is not None:
+            changes["iso"] = float(iso)
+        self.sensor = SensorConfig.from_mapping({**_as_dict(self.sensor), **changes})
+
+    # --- rendering -------------------------------------------------------------------------
+
+    def _view_hits(self) -> render.ViewHits:
+        key = _key(self.pose.R, self.pose.t)
+        if self._hits is None or self._hits[0] != key:
+            hits = render.trace_view(
+                self.caster,
+                self.intrinsics,
+                self.pose,
+                self.sensor.supersample,
+                "flat" if self.sensor.normals == "flat" else "smooth",
+                self._vertex_normals,
+            )
+            self._hits = (key, hits)
+            self._weights.clear()
+        return self._hits[1]
+
+    def render_linear(self) -> np.ndarray:
+        """Noise-free linear image ``y`` (H, W, 3) of what the camera sees now."""
+        hits = self._view_hits()
+        terms: list[tuple[np.ndarray, np.ndarray]] = []
+        spd = self.light.spd()
+        if spd.any():
+            key: tuple[bytes, ...] = (b"light", _key(self.light.position))
+            if key not in self._weights:
+                self._weights[key] = render.light_weight(self.caster, hits, self.light.position)
+            terms.append((self._weights[key], self._vertex_rgb(spd)))
+        proj = self.projector
+        if proj is not None and proj.image is not None:
+            key = (
+                b"proj",
+                _key(proj.pose.R, proj.pose.t),
+                hashlib.sha1(proj.image.tobytes()).digest(),
+            )
+            if key not in self._weights:
+                self._weights[key] = render.projector_weights(
+                    self.caster, hits, proj.image, proj.intrinsics, proj.pose
+                )
+            w = self._weights[key]
+            terms += [
+                (w[:, k], self._vertex_rgb(proj.primary_spds[c])) for k, c in enumerate("rgb")
+            ]
+        return render.shade_vertex_rgb(hits, terms)
+
+    def _vertex_rgb(self, spd: np.ndarray) -> np.ndarray:
+        """Per-vertex ``(C^T L) r``, cached per SPD (a capture uses a few illuminations)."""
+        key = _key(spd)
+        if key not in self._rgb:
+            if len(self._rgb) > 16:
+                self._rgb.clear()
+            resp = forward.response_matrix(self.sensitivity, spd)
+            self._rgb[key] = render.vertex_rgb(self.scene.reflectance, resp)
+        return self._rgb[key]
+
+    def expose(self, linear: np.ndarray, stem: str) -> np.ndarray:
+        """Linear image -> noisy, clipped uint16 Bayer mosaic (seeded by the seed and ``stem``)."""
+        s = self.sensor
+        rng = np.random.default_rng([self.seed, zlib.crc32(stem.encode())])
+        channel = _cfa_channel(s.pattern, s.height, s.width)
+        rows, cols = np.indices((s.height, s.width))
+        y = linear[rows, cols, channel]
+        span = s.white_level - s.black_level
+        signal_dn = np.maximum(y, 0.0) * span * s.exposure_s * s.iso / 100.0
+        gain = s.gain_e_per_dn * 100.0 / s.iso  # electrons per DN at this ISO
+        electrons = rng.poisson(signal_dn * gain)
+        dn = electrons / gain + rng.normal(0.0, s.read_noise_dn, y.shape)
+        raw = np.rint(s.black_level + dn)
+        return np.clip(raw, 0, s.white_level).astype(np.uint16)
+
+    def capture(self, out_dir: Path, stem: str) -> CapturedFrame:
+        """Render, expose and write ``out_dir/stem.dng``."""
+        out_dir = Path(out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        linear = self.render_linear()
+        mosaic = self.expose(linear, stem)
+        s = self.sensor
+        spd = self.light.spd()
+        neutral = self.sensitivity.T @ (spd if spd.any() else cie_illuminant("D65"))
+        path = out_dir / f"{stem}.dng"
+        write_dng(
+            path,
+            mosaic,
+            pattern=s.pattern,
+            black_level=s.black_level,
+            white_level=s.white_level,
+            exposure_s=s.exposure_s,
+            iso=s.iso,
+            make=s.make,
+            model=s.model,
+            serial=s.serial,
+            color_matrix=self._color_matrix,
+            as_shot_neutral=neutral / neutral.max() if neutral.max() > 0 else np.ones(3),
+        )
+        return CapturedFrame(
+            paths=(path,),
+            exposure_s=s.exposure_s,
+            iso=s.iso,
+            camera_serial=s.serial,
+            timestamp=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+            extra={
+                "black_level": s.black_level,
+                "white_level": s.white_level,
+                "cfa_pattern": s.pattern,
+                "illumination": self.light.illumination,
+                "saturated_fraction": float(np.mean(mosaic >= s.white_level)),
+            },
+        )
+
+
+def _key(*arrays: np.ndarray) -> bytes:
+    return b"".join(np.ascontiguousarray(a, dtype=float).tobytes() for a in arrays)
+
+
+def _as_dict(conf: SensorConfig) -> dict[str, Any]:
+    return {f.name: getattr(conf, f.name) for f in fields(conf)}

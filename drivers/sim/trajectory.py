@@ -1,0 +1,95 @@
+"""Camera poses and light positions for the simulated rig.
+
+Views lie on rings around the object (as a turntable or a hand-held walk-around would give),
+every camera looking at the target. The light is either rigidly mounted on the camera plate at
+an offset ``v`` in the camera frame (the paper's setup: ``p_c = R_c^T (v - t_c)``) or free: one
+seeded position per view, on a sphere around the object on the camera's side.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from calibration.errors import RigError
+from reconstruct.camera import Pose
+
+
+@dataclass(frozen=True)
+class TrajectoryConfig:
+    """Ring trajectory settings (the ``trajectory`` section of a sim profile)."""
+
+    views: int = 40
+    elevations_deg: tuple[float, ...] = (20.0, 45.0)
+    radius_m: float = 0.5
+    target_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    start_azimuth_deg: float = 0.0
+    light: str = "rigid"  # "rigid" or "free"
+    light_offset_m: tuple[float, float, float] = (0.06, -0.03, 0.0)
+    free_light_radius_m: float = 0.45
+
+    @classmethod
+    def from_mapping(
+        cls, data: Mapping[str, Any] | None, where: str = "sim.trajectory"
+    ) -> TrajectoryConfig:
+        """Build from a profile section; unknown keys and bad values raise :class:`RigError`."""
+        data = dict(data or {})
+        known = {f.name for f in fields(cls)}
+        unknown = set(data) - known
+        if unknown:
+            raise RigError(
+                f"{where}: unknown key(s) {', '.join(sorted(unknown))}",
+                f"use only {', '.join(sorted(known))}",
+            )
+        for key in ("elevations_deg", "target_m", "light_offset_m"):
+            if key in data:
+                data[key] = tuple(float(x) for x in data[key])
+        conf = cls(**data)
+        if conf.views < 1 or conf.radius_m <= 0 or not conf.elevations_deg:
+            raise RigError(
+                f"{where}: views={conf.views}, radius_m={conf.radius_m}, "
+                f"elevations_deg={list(conf.elevations_deg)}",
+                "use views >= 1, a positive radius and at least one elevation",
+            )
+        if conf.light not in ("rigid", "free"):
+            raise RigError(f"{where}.light = {conf.light!r}", "use 'rigid' or 'free'")
+        if len(conf.target_m) != 3 or len(conf.light_offset_m) != 3:
+            raise RigError(f"{where}: target_m and light_offset_m need 3 numbers (metres)")
+        return conf
+
+
+def ring_poses(conf: TrajectoryConfig) -> list[Pose]:
+    """``conf.views`` poses spread over the elevation rings (as evenly as they divide), each
+    ring's azimuths evenly spaced and staggered between rings, all looking at the target."""
+    rings = len(conf.elevations_deg)
+    counts = [conf.views // rings + (1 if k < conf.views % rings else 0) for k in range(rings)]
+    target = np.asarray(conf.target_m, dtype=float)
+    poses: list[Pose] = []
+    for k, (elev, n) in enumerate(zip(conf.elevations_deg, counts, strict=True)):
+        az = np.deg2rad(conf.start_azimuth_deg) + 2 * np.pi * (np.arange(n) + 0.5 * k) / max(n, 1)
+        e = np.deg2rad(elev)
+        for a in az:
+            eye = target + conf.radius_m * np.array(
+                [np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)]
+            )
+            poses.append(Pose.look_at(eye, target))
+    return poses
+
+
+def light_positions(conf: TrajectoryConfig, poses: Sequence[Pose], seed: int) -> np.ndarray:
+    """World light position per view, (N, 3)."""
+    if conf.light == "rigid":
+        return np.stack([p.light_position(np.asarray(conf.light_offset_m)) for p in poses])
+    rng = np.random.default_rng([seed, 7])
+    target = np.asarray(conf.target_m, dtype=float)
+    out = []
+    for p in poses:
+        to_cam = p.center - target
+        to_cam /= np.linalg.norm(to_cam)
+        # Within ~45° of the camera direction so the lit side is the one seen.
+        d = to_cam + rng.normal(scale=0.5, size=3)
+        out.append(target + conf.free_light_radius_m * d / np.linalg.norm(d))
+    return np.stack(out)
