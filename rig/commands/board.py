@@ -1,11 +1,135 @@
-"""`rig board`: print a ChArUco marker board for poses and metric scale."""
+"""`rig board`: print a ChArUco marker board for poses and metric scale.
+
+Writes the sheet (PDF at exact size, or PNG with its DPI) and a profile snippet recording the
+board's geometry; after printing, ``--measured-square-mm`` records the printed square size.
+"""
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
-from rig.commands._not_built import register
+from rich.console import Console
+
+from calibration.errors import RigError
+from reconstruct.board import PAPER_SIZES_M, BoardSpec, write_sheet
+from reconstruct.board.spec import DEFAULT_DICTIONARY, DEFAULT_MARKER_RATIO, DEFAULT_SQUARES
+from reconstruct.session import write_bytes_atomically
+
+
+def _squares(text: str) -> tuple[int, int]:
+    try:
+        sx, sy = (int(v) for v in text.lower().split("x"))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r} is not COLUMNSxROWS, e.g. 7x5") from exc
+    return sx, sy
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    register(subparsers, "board", "generate a printable ChArUco marker board", issue=9)
+    parser = subparsers.add_parser(
+        "board",
+        help="generate a printable ChArUco marker board",
+        description=(
+            "Generate a ChArUco board to lay under the object: it gives every view a metric, "
+            "upright pose even when the object has no texture. Writes the sheet and a YAML "
+            "profile snippet with its geometry. After printing, measure one square and run "
+            "`rig board --snippet SNIPPET --measured-square-mm MM`."
+        ),
+    )
+    parser.add_argument("--out", type=Path, help="sheet to write: .pdf (exact size) or .png")
+    parser.add_argument(
+        "--size",
+        default="A4",
+        type=str.upper,
+        choices=list(PAPER_SIZES_M),
+        help="paper size (default A4)",
+    )
+    parser.add_argument(
+        "--squares",
+        type=_squares,
+        default=DEFAULT_SQUARES,
+        metavar="CxR",
+        help="chessboard squares, columns x rows (default 10x7)",
+    )
+    parser.add_argument(
+        "--square-mm",
+        type=float,
+        help="square side in mm (default: the largest whole mm that fits the sheet)",
+    )
+    parser.add_argument(
+        "--marker-ratio",
+        type=float,
+        default=DEFAULT_MARKER_RATIO,
+        help=f"marker side / square side (default {DEFAULT_MARKER_RATIO})",
+    )
+    parser.add_argument(
+        "--dictionary",
+        default=DEFAULT_DICTIONARY,
+        help=f"ArUco dictionary (default {DEFAULT_DICTIONARY})",
+    )
+    parser.add_argument("--dpi", type=int, default=300, help="PNG resolution (default 300)")
+    parser.add_argument(
+        "--snippet",
+        type=Path,
+        help="profile snippet (YAML) to write, or to update with --measured-square-mm "
+        "(default: next to --out, .yaml)",
+    )
+    parser.add_argument(
+        "--measured-square-mm",
+        type=float,
+        help="side of one square as measured on the print, in mm (records the print's scale)",
+    )
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    console = Console(soft_wrap=True)
+    measured = None if args.measured_square_mm is None else args.measured_square_mm / 1000
+    if args.out is None:
+        if args.snippet is None or measured is None:
+            raise RigError(
+                "nothing to do: no --out sheet and no snippet to update",
+                "run `rig board --out board.pdf`, or after printing "
+                "`rig board --snippet board.yaml --measured-square-mm MM`",
+            )
+        spec = BoardSpec.from_yaml(args.snippet).with_measured_square(measured)
+        _write_snippet(args.snippet, spec)
+        console.print(
+            f"{args.snippet}: measured square {measured * 1000:g} mm recorded "
+            f"(designed {spec.square_length_m * 1000:g} mm, print scale {spec.scale:.4f})"
+        )
+        return 0
+    spec = BoardSpec.fit_paper(
+        paper=args.size,
+        squares=args.squares,
+        square_length_m=None if args.square_mm is None else args.square_mm / 1000,
+        marker_ratio=args.marker_ratio,
+        dictionary=args.dictionary,
+    )
+    sheet = write_sheet(spec, args.out, dpi=args.dpi)
+    if measured is not None:
+        spec = spec.with_measured_square(measured)
+    snippet = args.snippet or args.out.with_suffix(".yaml")
+    _write_snippet(snippet, spec)
+    sx, sy = spec.squares
+    w, h = spec.size_m
+    console.print(
+        f"{sheet}: {sx}x{sy} ChArUco ({spec.dictionary}) on {spec.paper}, squares "
+        f"{spec.square_length_m * 1000:g} mm, markers {spec.marker_length_m * 1000:g} mm, "
+        f"board {w * 1000:g} x {h * 1000:g} mm"
+        + (f", {args.dpi} dpi" if sheet.suffix.lower() == ".png" else "")
+    )
+    console.print(f"{snippet}: profile snippet (paste its board: entry into your profile)")
+    if measured is None:
+        console.print(
+            "Print at 100 % (no fit-to-page), measure one square, then run "
+            f"`rig board --snippet {snippet} --measured-square-mm MM`."
+        )
+    return 0
+
+
+def _write_snippet(path: Path, spec: BoardSpec) -> None:
+    try:
+        write_bytes_atomically(path, spec.to_yaml().encode())
+    except OSError as exc:
+        raise RigError(f"cannot write {path}: {exc}", "check the folder is writable") from exc
