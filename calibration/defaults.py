@@ -162,11 +162,17 @@ def illumination_spd(levels: Mapping[str, float], channels: Mapping[str, np.ndar
                 f"illumination uses unknown channel {key!r}",
                 f"use the light's channels: {', '.join(channels)}",
             )
-        if not (0.0 <= float(level) <= 1.0):
+        try:
+            value = float(level)
+        except (TypeError, ValueError) as error:
+            raise RigError(
+                f"channel {key!r} level {level!r} is not a number", "use 0..1"
+            ) from error
+        if not 0.0 <= value <= 1.0:
             raise RigError(
                 f"channel {key!r} level {level} is outside 0..1", "use levels between 0 and 1"
             )
-        term = float(level) * np.asarray(channels[key], dtype=float)
+        term = value * np.asarray(channels[key], dtype=float)
         total = term if total is None else total + term
     assert total is not None
     return total

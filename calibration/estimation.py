@@ -71,14 +71,15 @@ def estimation_matrix(
 
 def estimate_reflectance(
     rgb: np.ndarray,
-    response_matrices: np.ndarray,
+    responses: np.ndarray,
     basis: SpectralBasis,
     smoothness: float = DEFAULT_SMOOTHNESS,
     *,
     fit_scale: bool = False,
     shading: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Reflectance per pixel from ``rgb`` (P, K, 3) under ``response_matrices`` (K, 3, N_λ).
+    """Reflectance per pixel from ``rgb`` (P, K, 3) under ``responses`` (K, 3, N_λ), the
+    matrices :func:`response_matrices` builds.
 
     ``shading`` (P, K), optional: a per-pixel, per-illumination factor multiplying the response
     (0 = not observed). NaN entries in ``rgb`` are missing values (saturated/masked) and are
@@ -87,8 +88,13 @@ def estimate_reflectance(
     maximum of 1. Returns ``(alpha (P, N_b), reflectance (P, N_λ))``.
     """
     y = np.asarray(rgb, dtype=float)
-    resp = np.asarray(response_matrices, dtype=float)
+    resp = np.asarray(responses, dtype=float)
     _check(y, resp, basis)
+    if not smoothness >= 0:
+        raise RigError(
+            f"smoothness {smoothness:g} is negative or NaN",
+            f"use 0 (none) or a positive relative weight (default {DEFAULT_SMOOTHNESS})",
+        )
     missing = ~np.isfinite(y)
     if shading is None and not missing.any():
         w = estimation_matrix(resp, basis, smoothness)

@@ -106,12 +106,10 @@ def _read_text(path: Path) -> list[str]:
             f"{path} is a binary file",
             "export the spectrum as text (CSV or the software's text format)",
         )
-    for encoding in ("utf-8-sig", "latin-1"):
-        try:
-            return raw.decode(encoding).splitlines()
-        except UnicodeDecodeError:
-            continue
-    raise RigError(f"{path} is not a text file", "export the spectrum as text")  # pragma: no cover
+    try:
+        return raw.decode("utf-8-sig").splitlines()
+    except UnicodeDecodeError:  # older vendor software writes Latin-1 (e.g. "µs")
+        return raw.decode("latin-1").splitlines()
 
 
 def _finish(
@@ -218,10 +216,10 @@ def _oceanview_meta(header: list[str]) -> dict[str, Any]:
             meta["operator"] = value
         elif key.startswith("integration time"):
             num = re.match(r"[-+0-9.,Ee]+", value)
-            if num:
-                seconds = _number(num.group(0), "," in num.group(0))
-                scale = 1e-6 if "usec" in key else 1e-3 if "msec" in key else 1.0
-                meta["integration_time_ms"] = seconds * scale * 1e3
+            if num:  # the key names the unit: (usec), (msec) or (sec)
+                number = _number(num.group(0), "," in num.group(0))
+                to_seconds = 1e-6 if "usec" in key else 1e-3 if "msec" in key else 1.0
+                meta["integration_time_ms"] = number * to_seconds * 1e3
         elif key.startswith("scans to average") or key.startswith("spectra averaged"):
             meta["scans_averaged"] = value.split()[0]
     return meta

@@ -85,6 +85,8 @@ def rank_illumination_sets(
         raise RigError(f"--max-size {max_size} must be at least 1", "use 1 or more")
     if noise < 0:
         raise RigError(f"noise {noise} is negative", "give the noise as a fraction, e.g. 0.01")
+    if smoothness is not None and not smoothness >= 0:
+        raise RigError(f"--smoothness {smoothness:g} is negative", "use 0 or more, or leave it out")
     max_size = min(max_size, len(names))
     total = sum(math.comb(len(names), k) for k in range(1, max_size + 1))
     if total > MAX_SUBSETS:

@@ -7,8 +7,9 @@ valid spectrum and how it is brought onto the grid:
 * wavelengths must be finite, strictly increasing (no duplicates) and cover the grid;
 * values must be finite; with ``nonnegative=True`` (power, sensitivity, reflectance) values below
   ``-5 %`` of the peak are an error, smaller negatives are dark-subtraction noise and become 0;
-* interpolation is colour-science's: :class:`colour.MultiSpectralDistributions` ``.align`` with
-  its default interpolator (Sprague 1880 for evenly spaced data, cubic spline otherwise);
+* interpolation is colour-science's: a :class:`colour.MultiSpectralDistributions` evaluated at
+  the grid wavelengths with the interpolator its ``interpolate``/``align`` picks (Sprague 1880
+  for evenly spaced data, cubic spline otherwise);
 * data much denser than the grid (every step ≤ a quarter of the grid step, e.g. a spectrometer's
   0.3–1 nm pixels) is first box-averaged over
   one grid step, which is what a 10 nm-bandwidth measurement would record and keeps pixel noise
@@ -18,8 +19,6 @@ valid spectrum and how it is brought onto the grid:
 """
 
 from __future__ import annotations
-
-import warnings
 
 import colour
 import numpy as np
@@ -120,6 +119,21 @@ def _box_average(w: np.ndarray, v: np.ndarray, width: float) -> np.ndarray:
     return (integral(hi) - integral(lo)) / (hi - lo)[:, None]
 
 
+def _interpolate(w: np.ndarray, v: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """``v`` (M, k) sampled at ``w`` evaluated at ``target`` with colour-science's interpolator.
+
+    Uses the interpolator :meth:`colour.SpectralDistribution.interpolate` would pick (Sprague for
+    evenly spaced data, cubic spline otherwise) at exactly the target wavelengths; targets outside
+    ``w`` take the edge value (colour's constant extrapolation). ``align()`` is not used because,
+    for data starting inside the grid, it builds its domain from the data's first wavelength and
+    the grid points then fall between its samples.
+    """
+    msds = colour.MultiSpectralDistributions(v, w, labels=[f"c{j}" for j in range(v.shape[1])])
+    uniform = msds.is_uniform()
+    msds.interpolator = colour.SpragueInterpolator if uniform else colour.CubicSplineInterpolator
+    return np.asarray(msds[np.clip(target, w[0], w[-1])], dtype=float).reshape(target.size, -1)
+
+
 def resample(
     wavelengths_nm: npt.ArrayLike,
     values: npt.ArrayLike,
@@ -152,17 +166,7 @@ def resample(
     if w.size == target.size and np.allclose(w, target):
         out = v.copy()
     else:
-        msds = colour.MultiSpectralDistributions(v, w, labels=[f"c{j}" for j in range(v.shape[1])])
-        shape = colour.SpectralShape(grid.start_nm, grid.stop_nm, grid.step_nm)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            aligned = msds.copy().align(
-                shape, extrapolator_kwargs={"method": "Constant", "left": None, "right": None}
-            )
-        out = np.asarray(aligned.values, dtype=float)
-        # align() samples the aligned domain; pick exactly the grid wavelengths.
-        idx = np.searchsorted(aligned.wavelengths, target - tol)
-        out = out[idx]
+        out = _interpolate(w, v, target)
     if nonnegative:
         out = np.clip(out, 0.0, None)  # interpolation ringing around narrow LED peaks
     return out[:, 0] if squeeze else out

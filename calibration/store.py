@@ -24,7 +24,7 @@ import shutil
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import yaml
@@ -37,18 +37,13 @@ from calibration.spectra import resample, validate_spectrum
 FORMAT = "spectral-rig-calibration/1"
 ENV_STORE = "SPECTRAL_RIG_STORE"
 INDEX = "index.yaml"
-Kind = Literal["light", "camera"]
 KINDS: tuple[str, ...] = ("light", "camera")
-PROVENANCE_KEYS = (
-    "source",
-    "device",
-    "serial",
-    "date",
-    "instrument",
-    "integration_time_ms",
-    "notes",
-)
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+\- /]*$")
+
+
+def value_columns(kind: str) -> list[str]:
+    """The CSV value columns of a store entry of ``kind`` (DESIGN.md: power, or R,G,B)."""
+    return ["power"] if kind == "light" else ["R", "G", "B"]
 
 
 @dataclass
@@ -65,7 +60,7 @@ class Entry:
 
     @property
     def columns(self) -> list[str]:
-        return ["power"] if self.kind == "light" else ["R", "G", "B"]
+        return value_columns(self.kind)
 
 
 def default_store_path() -> Path:
@@ -169,6 +164,12 @@ class CalibrationStore:
                     f"{self.index_path}: entry {entry.name!r} has kind {entry.kind!r}",
                     "use light or camera",
                 )
+            if not isinstance(entry.version, int) or not isinstance(entry.provenance, dict):
+                raise RigError(
+                    f"{self.index_path}: entry {entry.name!r} has version {entry.version!r} "
+                    f"and provenance of type {type(entry.provenance).__name__}",
+                    "the version must be a whole number and the provenance a mapping",
+                )
             entries.append(entry)
         return entries
 
@@ -262,7 +263,7 @@ class CalibrationStore:
         clash = [e for e in self._entries if e.name == name and e.kind != kind]
         if clash:
             raise RigError(f"{name!r} already names a {clash[0].kind} entry", "choose another name")
-        columns = ["power"] if kind == "light" else ["R", "G", "B"]
+        columns = value_columns(kind)
         w, v = validate_spectrum(wavelengths, values, source=f"{kind} {name!r}")
         if v.shape[1] != len(columns):
             raise RigError(
@@ -271,6 +272,8 @@ class CalibrationStore:
             )
         version = 1 + max((e.version for e in self._entries if e.name == name), default=0)
         slug = re.sub(r"[^A-Za-z0-9._+-]", "-", name.replace("/", "__").replace(" ", "_"))
+        if any(e.file.startswith(f"{kind}s/{slug}.v") for e in self._entries if e.name != name):
+            slug += "-" + hashlib.sha256(name.encode()).hexdigest()[:8]  # "a b" vs "a_b"
         rel = f"{kind}s/{slug}.v{version}.csv"
         path = self.root / rel
         if path.exists():
@@ -331,9 +334,18 @@ class CalibrationStore:
         for e in self._entries:
             target = dest / e.file
             target.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(self.root / e.file, target)
-        shutil.copy2(self.index_path, dest / INDEX)
-        return CalibrationStore(dest)
+            try:
+                shutil.copy2(self.root / e.file, target)
+            except OSError as error:
+                raise RigError(
+                    f"cannot copy calibration file {self.root / e.file} ({e.name!r} "
+                    f"v{e.version}) to {target}: {error.strerror or error}",
+                    "restore the file or remove the entry, and check the destination's disk",
+                ) from error
+        snapshot = CalibrationStore(dest)
+        snapshot._entries = list(self._entries)
+        snapshot._write_index()  # also for a store never written (no index.yaml yet)
+        return snapshot
 
     @classmethod
     def create_default(

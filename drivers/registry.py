@@ -13,6 +13,9 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from calibration.errors import RigError
+from drivers.lights.k8062 import K8062_PID, VELLEMAN_VID
+from drivers.lights.magichome import PORT as MAGIC_HOME_PORT
+from drivers.lights.udmx import UDMX_PID, UDMX_PRODUCT, UDMX_VID
 from drivers.protocols import Camera, LightSource, Projector, Spectrometer
 from drivers.transports import open_transport, redact
 from drivers.transports.base import Transport
@@ -22,8 +25,8 @@ log = logging.getLogger(__name__)
 # (vid, pid) -> (driver, what it is), for `rig devices`.
 USB_IDS: dict[tuple[int, int], tuple[str, str]] = {
     (0x0403, 0x6001): ("enttec-dmx-pro", "FTDI serial (Enttec DMX USB Pro and compatibles)"),
-    (0x16C0, 0x05DC): ("udmx", "uDMX (anyma.ch) USB DMX"),
-    (0x10CF, 0x8062): ("velleman-k8062", "Velleman K8062 / VM116 DMX"),
+    (UDMX_VID, UDMX_PID): ("udmx", "uDMX (anyma.ch) USB DMX"),
+    (VELLEMAN_VID, K8062_PID): ("velleman-k8062", "Velleman K8062 / VM116 DMX"),
     (0x2341, 0x0043): ("rgbcw-serial", "Arduino Uno (rgbcw-text firmware?)"),
     (0x2341, 0x0058): ("rgbcw-serial", "Arduino Nano Every (rgbcw-text firmware?)"),
     (0x1A86, 0x7523): ("rgbcw-serial", "CH340 USB serial (Arduino clone, rgbcw-text firmware?)"),
@@ -36,9 +39,9 @@ DEFAULT_TRANSPORTS: dict[str, dict[str, Any]] = {
     "enttec-dmx-pro": {"type": "serial", "baudrate": 57600},
     "dmx": {"type": "serial", "baudrate": 57600},
     "rgbcw-serial": {"type": "serial", "baudrate": 115200},
-    "udmx": {"type": "usb", "vid": 0x16C0, "pid": 0x05DC},
-    "velleman-k8062": {"type": "hid", "vid": 0x10CF, "pid": 0x8062},
-    "magic-home": {"type": "tcp", "port": 5577},
+    "udmx": {"type": "usb", "vid": UDMX_VID, "pid": UDMX_PID, "product": UDMX_PRODUCT},
+    "velleman-k8062": {"type": "hid", "vid": VELLEMAN_VID, "pid": K8062_PID},
+    "magic-home": {"type": "tcp", "port": MAGIC_HOME_PORT},
 }
 
 
@@ -232,20 +235,16 @@ def _open(kind: str, spec: Mapping[str, Any]) -> Any:
 
 
 def open_light(spec: Mapping[str, Any]) -> LightSource:
-    light: LightSource = _open("light", spec)
-    return light
+    return _open("light", spec)
 
 
 def open_camera(spec: Mapping[str, Any]) -> Camera:
-    camera: Camera = _open("camera", spec)
-    return camera
+    return _open("camera", spec)
 
 
 def open_projector(spec: Mapping[str, Any]) -> Projector:
-    projector: Projector = _open("projector", spec)
-    return projector
+    return _open("projector", spec)
 
 
 def open_spectrometer(spec: Mapping[str, Any]) -> Spectrometer:
-    spectrometer: Spectrometer = _open("spectrometer", spec)
-    return spectrometer
+    return _open("spectrometer", spec)

@@ -143,7 +143,13 @@ class RecordingTransport(Transport):
         super().__init__(inner.address, inner.timeout_s)
         self.inner = inner
         self.path = Path(path)
-        self._file: TextIO = open(self.path, "a", encoding="utf-8")
+        try:
+            self._file: TextIO = open(self.path, "a", encoding="utf-8")
+        except OSError as error:
+            raise RigError(
+                f"cannot write the transport recording {self.path}: {error.strerror or error}",
+                "fix the `record:` path in the profile (its folder must exist)",
+            ) from error
         self._request: bytes | None = None
         self._reply = b""
         self._open = False

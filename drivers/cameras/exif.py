@@ -17,7 +17,7 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class ExifInfo:
-    taken: datetime | None = None
+    taken: datetime | None = None  # time zone aware
     exposure_s: float | None = None
     iso: float | None = None
     serial: str | None = None
@@ -35,7 +35,9 @@ def _ratio(value: Any) -> float | None:
     return number or None
 
 
-def _time(text: Any, subsec: Any = "") -> datetime | None:
+def _time(text: Any, subsec: Any = "", offset: Any = "") -> datetime | None:
+    """EXIF ``YYYY:MM:DD HH:MM:SS`` as an aware datetime: with the EXIF offset when the camera
+    wrote one, else in this computer's time zone (where camera clocks are normally set)."""
     text = str(text or "").strip().strip("\x00")
     if not text:
         return None
@@ -46,7 +48,11 @@ def _time(text: Any, subsec: Any = "") -> datetime | None:
     digits = "".join(ch for ch in str(subsec or "") if ch.isdigit())
     if digits:
         taken = taken.replace(microsecond=int((digits + "000000")[:6]))
-    return taken
+    try:
+        zone = datetime.strptime(str(offset or "").strip().strip("\x00"), "%z").tzinfo
+    except ValueError:
+        return taken.astimezone()
+    return taken.replace(tzinfo=zone)
 
 
 def _text(value: Any) -> str | None:
@@ -79,7 +85,11 @@ def _read_tiff(path: Path) -> ExifInfo:
         if isinstance(iso, tuple):
             iso = iso[0] if iso else None
         return ExifInfo(
-            taken=_time(exif.get("DateTimeOriginal"), exif.get("SubsecTimeOriginal"))
+            taken=_time(
+                exif.get("DateTimeOriginal"),
+                exif.get("SubsecTimeOriginal"),
+                exif.get("OffsetTimeOriginal"),
+            )
             or _time(get("DateTime")),
             exposure_s=_ratio(exif.get("ExposureTime")),
             iso=float(iso) if iso else None,
@@ -96,7 +106,8 @@ def _read_jpeg(path: Path) -> ExifInfo:
         exif = base.get_ifd(0x8769)
         iso = exif.get(0x8827)
         return ExifInfo(
-            taken=_time(exif.get(0x9003), exif.get(0x9291)) or _time(base.get(0x0132)),
+            taken=_time(exif.get(0x9003), exif.get(0x9291), exif.get(0x9011))
+            or _time(base.get(0x0132)),
             exposure_s=_ratio(exif.get(0x829A)),
             iso=float(iso) if iso else None,
             serial=_text(exif.get(0xA431)),

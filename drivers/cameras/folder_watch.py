@@ -43,7 +43,7 @@ def frame_from_files(
             f"{paths[0].name} carries no exposure time/ISO in its EXIF",
             "give `exposure_s:` and `iso:` in the camera section of the profile",
         )
-    taken = exif.taken.isoformat() if exif.taken else datetime.now(timezone.utc).isoformat()
+    taken = (exif.taken or datetime.now(timezone.utc)).astimezone(timezone.utc).isoformat()
     return CapturedFrame(
         paths=tuple(paths),
         exposure_s=exposure,

@@ -27,7 +27,6 @@ T = TypeVar("T")
 
 CAPTURE_TARGETS = {"ram": "Internal RAM", "card": "Memory card"}
 SERIAL_KEYS = ("serialnumber", "eosserialnumber")
-EXPOSURE_KEYS = ("shutterspeed", "exposuretime", "shutterspeed2")
 
 
 def parse_shutter(text: str) -> float | None:
@@ -40,6 +39,12 @@ def parse_shutter(text: str) -> float | None:
         return float(text)
     except (ValueError, ZeroDivisionError):
         return None
+
+
+def parse_iso(text: str) -> float | None:
+    """'400' -> 400.0; 'Auto' and other words -> None."""
+    text = text.strip()
+    return float(text) if text.isdigit() else None
 
 
 def parse_aperture(text: str) -> float | None:
@@ -176,6 +181,10 @@ class Gphoto2Camera:
                 return value
         return None
 
+    def _setting_text(self, key: str) -> str:
+        """The camera's value for a profile setting (``exposure_s``, ``iso``...), or ''."""
+        return self._first_value(SETTING_WIDGETS[key]) or ""
+
     def set_config(self, values: Mapping[str, str], required: bool = True) -> None:
         config = self._call("read its settings", self.camera.get_config)
         changed = False
@@ -276,9 +285,9 @@ class Gphoto2Camera:
             except RigError as error:
                 log.debug("could not delete %s/%s from camera RAM: %s", folder, name, error)
         exif = read_exif(paths[0])
-        exposure = exif.exposure_s or parse_shutter(self._first_value(EXPOSURE_KEYS) or "")
-        iso_text = self.get_config("iso")
-        iso = exif.iso or (float(iso_text) if iso_text and iso_text.isdigit() else None)
+        # the camera's current settings only where the file's EXIF lacks them
+        exposure = exif.exposure_s or parse_shutter(self._setting_text("exposure_s"))
+        iso = exif.iso or parse_iso(self._setting_text("iso"))
         if exposure is None or iso is None:
             raise RigError(
                 f"camera did not report exposure/ISO for {paths[0].name}",

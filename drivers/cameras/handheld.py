@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import replace
-from datetime import datetime
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +22,7 @@ def capture_order(paths: Iterable[Path]) -> list[Path]:
     time; ties by name (burst shots within one second)."""
 
     def key(path: Path) -> tuple[datetime, str]:
-        taken = read_exif(path).taken or datetime.fromtimestamp(path.stat().st_mtime)
+        taken = read_exif(path).taken or datetime.fromtimestamp(path.stat().st_mtime, timezone.utc)
         return taken, path.name
 
     return sorted(paths, key=key)
@@ -59,6 +59,7 @@ class HandheldImportCamera:
             raise RigError(
                 f"import folder {self.folder} does not exist", "give the folder with the shots"
             )
+        extensions = tuple(extensions)  # read twice: for the listing and the error message
         files = list(list_files(self.folder, extensions))
         self.files = (
             match_files_to_frames(files, frame_count)

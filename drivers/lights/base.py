@@ -25,6 +25,13 @@ def to_byte(level: float) -> int:
     return int(round(level * 255))
 
 
+def colour_and_white(levels: Mapping[str, float]) -> tuple[bool, bool]:
+    """Whether any of r/g/b and any of c/w is lit: Wi-Fi bulbs show colour *or* white."""
+    colour = any(levels.get(c, 0.0) > 0 for c in "rgb")
+    white = any(levels.get(c, 0.0) > 0 for c in "cw")
+    return colour, white
+
+
 def check_illuminations(
     illuminations: Mapping[str, Mapping[str, float]] | None, channels: Sequence[str], where: str
 ) -> dict[str, dict[str, float]]:

@@ -28,6 +28,17 @@ def check_address(value: Any, where: str) -> int:
     return address
 
 
+def check_slot_value(value: Any, where: str) -> int:
+    """A fixed slot's 8-bit DMX value (0..255)."""
+    try:
+        number = int(value)
+    except (TypeError, ValueError) as error:
+        raise RigError(f"{where} = {value!r} is not a DMX value", "use 0..255") from error
+    if not 0 <= number <= 255 or number != value:
+        raise RigError(f"{where} = {value!r} is not a DMX value", "use a whole number 0..255")
+    return number
+
+
 def channel_addresses(
     channels: Mapping[str, int] | Sequence[str], start_address: int, where: str
 ) -> dict[str, int]:
@@ -61,12 +72,11 @@ class DmxLight(LightBase):
     ) -> None:
         self.addresses = channel_addresses(channels, start_address, self.driver_name)
         self.fixed = {
-            check_address(addr, f"{self.driver_name}.fixed"): int(value)
+            check_address(addr, f"{self.driver_name}.fixed"): check_slot_value(
+                value, f"{self.driver_name}.fixed.{addr}"
+            )
             for addr, value in (fixed or {}).items()
         }
-        for address, value in self.fixed.items():
-            if not 0 <= value <= 255:
-                raise RigError(f"{self.driver_name}.fixed.{address} = {value}", "use 0..255")
         clash = set(self.addresses.values()) & set(self.fixed)
         if clash:
             raise RigError(

@@ -4,6 +4,10 @@ Report types (first byte), as the OLA usbdmx plugin documents them:
 ``4`` starts a frame: [4, leading zeros + 1 (start code), 6 slots];
 ``5`` continues after zeros: [5, zeros, 6 slots]; ``2`` continues: [2, 7 slots];
 ``3`` sends one trailing slot: [3, slot, 0...]. See docs/protocols/velleman-k8062.md.
+
+The widget puts a frame on the DMX line only when the next frame begins (OLA keeps streaming
+frames for this reason), so every change is sent twice: the copy releases the real frame, and
+whatever comes next releases the copy, which holds the same levels.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ VELLEMAN_VID, K8062_PID = 0x10CF, 0x8062
 REPORT_SIZE = 8
 BREAK_MSG, INTERMEDIATE_MSG, SINGLE_SLOT_MSG, COMPRESSED_MSG = 4, 2, 3, 5
 MAX_LEADING_ZEROS = 100  # the standard firmware misbehaves beyond this (OLA)
+FRAMES_PER_CHANGE = 2  # see the module docstring
 
 
 def leading_zeros(data: bytes) -> int:
@@ -52,5 +57,5 @@ class VellemanK8062(DmxLight):
     driver_name = "velleman-k8062"
 
     def _send(self, slots: bytes) -> None:
-        for chunk in frame_reports(slots):
+        for chunk in frame_reports(slots) * FRAMES_PER_CHANGE:
             self.transport.write(chunk)

@@ -14,7 +14,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from calibration.errors import RigError
-from drivers.lights.base import LightBase, to_byte
+from drivers.lights.base import LightBase, colour_and_white, to_byte
 from drivers.transports.base import NotAnsweringError, Transport
 
 PORT = 5577
@@ -90,8 +90,7 @@ class MagicHomeLight(LightBase):
             ) from error
 
     def _mode(self, levels: Mapping[str, float], what: str) -> int:
-        colour = any(levels.get(c, 0.0) > 0 for c in "rgb")
-        white = any(levels.get(c, 0.0) > 0 for c in "cw")
+        colour, white = colour_and_white(levels)
         if not self.exclusive_white:
             return MODE_BOTH
         if colour and white:

@@ -66,11 +66,11 @@ class RgbcwSerialLight(LightBase):
             self.transport.write(b"ID?\n")
             try:
                 line = self._line("the ID? reply")
+                while line == "READY":  # boot banner: the ID? may have been lost in the reset
+                    line = self._line("the ID? reply")
             except NotAnsweringError as error:
                 last = error
                 continue
-            while line == "READY":  # boot banner printed after a reset
-                line = self._line("the ID? reply")
             if not line.startswith("ID "):
                 raise RigError(
                     f"{self.transport.address} answered {line!r} to ID?",

@@ -14,7 +14,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from calibration.errors import MissingDependencyError, RigError
-from drivers.lights.base import LightBase, to_byte
+from drivers.lights.base import LightBase, colour_and_white, to_byte
 
 CHANNELS = ("r", "g", "b", "c", "w")
 
@@ -62,8 +62,7 @@ class TuyaBulb(LightBase):
     @staticmethod
     def _check_exclusive(levels: Mapping[str, float], what: str) -> bool:
         """True for colour mode; raises for a colour + white mix."""
-        colour = any(levels.get(c, 0.0) > 0 for c in "rgb")
-        white = any(levels.get(c, 0.0) > 0 for c in "cw")
+        colour, white = colour_and_white(levels)
         if colour and white:
             raise RigError(
                 f"{what} mixes colour (r/g/b) and white (c/w) channels",

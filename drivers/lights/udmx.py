@@ -10,6 +10,7 @@ from drivers.lights.dmx import DmxLight
 from drivers.transports.usb_device import VENDOR_OUT, control_out
 
 UDMX_VID, UDMX_PID = 0x16C0, 0x05DC
+UDMX_PRODUCT = "uDMX"  # the id is V-USB's shared one: the product string tells a uDMX apart
 CMD_SET_SINGLE_CHANNEL = 1
 CMD_SET_CHANNEL_RANGE = 2
 

@@ -6,6 +6,7 @@ the person measures in the vendor software and exports a file; this reads it wit
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -52,13 +53,7 @@ class FileImportSpectrometer:
         spectrum = self._read(
             "Measure the dark reference in the vendor software, export it, and type the file path: "
         )
-        return Spectrum(
-            spectrum.wavelengths_nm,
-            spectrum.values,
-            spectrum.integration_time_s,
-            False,
-            spectrum.saturated,
-        )
+        return replace(spectrum, dark_subtracted=False)  # a dark is never dark-subtracted
 
     def measure(self) -> Spectrum:
         return self._read(

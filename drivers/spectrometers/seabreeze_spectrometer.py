@@ -75,9 +75,14 @@ class SeabreezeSpectrometer:
         self.dark: Spectrum | None = None
 
     def set_integration_time(self, seconds: float) -> None:
+        """Set the time and drop one scan: a free-running Ocean spectrometer returns the
+        spectrum already under way, integrated with the old time (python-seabreeze #110)."""
         seconds = float(np.clip(seconds, self.min_s, self.max_s))
+        if seconds == self.integration_time_s:
+            return
         self.device.integration_time_micros(int(round(seconds * 1e6)))
         self.integration_time_s = seconds
+        self.device.intensities()
 
     def _scan(self, count: int) -> np.ndarray:
         scans = [np.asarray(self.device.intensities(), dtype=np.float64) for _ in range(count)]

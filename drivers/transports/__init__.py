@@ -37,18 +37,27 @@ def open_transport(spec: Mapping[str, Any], where: str = "transport") -> Transpo
     kind = options.pop("type", None) or options.pop("kind", None)  # profiles may say `kind:`
     options.pop("kind", None)
     record = options.pop("record", None)
-    timeout = float(options.pop("timeout_s", 1.0))
     try:
+        timeout = float(options.pop("timeout_s", 1.0))
         transport = _open(kind, options, timeout)
     except (TypeError, KeyError) as error:  # unknown or missing keys
         raise RigError(
             f"{where} {redact(spec)} has unexpected or missing keys ({error})",
             "see docs/usage-drivers.md for the keys each transport type takes",
         ) from error
+    except ValueError as error:  # a port, timeout or baud rate that is not a valid number
+        raise RigError(
+            f"{where} {redact(spec)} has a bad value ({error})",
+            "see docs/usage-drivers.md for the values each transport type takes",
+        ) from error
     if record:
         from drivers.testing import RecordingTransport
 
-        return RecordingTransport(transport, record)
+        try:
+            return RecordingTransport(transport, record)
+        except RigError:
+            transport.close()
+            raise
     return transport
 
 

@@ -67,12 +67,22 @@ class HidTransport(Transport):
         self.vid, self.pid = vid, pid
 
     def _write(self, data: bytes) -> None:
-        written = self._dev.write(bytes([self.report_id]) + data)
+        try:
+            written = self._dev.write(bytes([self.report_id]) + data)
+        except OSError as error:  # newer hidapi raises where older returns -1
+            raise self._failed("writing to", error) from error
         if written < 0:
-            raise RigError(f"writing to HID device {self.address} failed", "replug the device")
+            raise self._failed("writing to")
 
     def _read(self, size: int) -> bytes:
-        return bytes(self._dev.read(size, int(self.timeout_s * 1000)))
+        try:
+            return bytes(self._dev.read(size, int(self.timeout_s * 1000)))
+        except OSError as error:  # e.g. unplugged
+            raise self._failed("reading from", error) from error
+
+    def _failed(self, action: str, error: OSError | None = None) -> RigError:
+        reason = f": {error}" if error else ""
+        return RigError(f"{action} HID device {self.address} failed{reason}", "replug the device")
 
     def _close(self) -> None:
         self._dev.close()

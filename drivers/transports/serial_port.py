@@ -31,6 +31,7 @@ class SerialTransport(Transport):
         super().__init__(port, timeout_s)
         if serial_module is None:
             serial_module = importlib.import_module("serial")
+        self._serial = serial_module  # its exception classes, for the fake one in tests too
         self.baudrate = baudrate
         try:
             self._port = serial_module.Serial(
@@ -44,24 +45,20 @@ class SerialTransport(Transport):
             raise open_error(port, error) from error
 
     def _write(self, data: bytes) -> None:
-        import serial
-
         try:
             self._port.write(data)
             self._port.flush()
-        except serial.SerialTimeoutException as error:
+        except self._serial.SerialTimeoutException as error:
             raise self.not_answering("the write to finish") from error
-        except serial.SerialException as error:
+        except self._serial.SerialException as error:
             raise RigError(
                 f"serial port {self.address} failed: {error}", "reconnect the device"
             ) from error
 
     def _read(self, size: int) -> bytes:
-        import serial
-
         try:
             return bytes(self._port.read(size))
-        except serial.SerialException as error:
+        except self._serial.SerialException as error:
             raise RigError(
                 f"serial port {self.address} failed: {error}", "reconnect the device"
             ) from error

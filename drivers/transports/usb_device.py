@@ -57,6 +57,7 @@ class UsbTransport(Transport):
         vid: int,
         pid: int,
         serial: str | None = None,
+        product: str | None = None,
         timeout_s: float = 1.0,
         usb_core: Any = None,
     ) -> None:
@@ -74,13 +75,32 @@ class UsbTransport(Transport):
                 "pyusb needs the libusb system library (Debian: `sudo apt install libusb-1.0-0`)",
             ) from error
         if serial is not None:
-            found = [d for d in found if _serial_of(d) == serial]
+            found = [d for d in found if string_descriptor(d, "serial_number") == serial]
         if not found:
             raise RigError(
                 f"no USB device {self.address} is connected", "plug it in and run `rig devices`"
             )
+        if product is not None:
+            found = self._with_product(found, product)
         self._dev = found[0]
         self._pending = b""
+
+    def _with_product(self, devices: list[Any], product: str) -> list[Any]:
+        """Devices whose product string is ``product``: shared VID/PIDs (the V-USB 16c0:05dc
+        of uDMX is also a USBasp programmer's) must not get another device's requests."""
+        names = [string_descriptor(d, "product") for d in devices]
+        matching = [d for d, name in zip(devices, names, strict=True) if name == product]
+        if matching:
+            return matching
+        if None in names:
+            raise RigError(
+                f"cannot read the product name of USB device {self.address} (permission denied?)",
+                USB_UDEV_HINT.format(vid=self.vid, pid=self.pid),
+            )
+        raise RigError(
+            f"USB device {self.address} is {', '.join(repr(n) for n in names)}, not {product!r}",
+            f"that id is shared with other devices: plug in the {product} or fix the profile",
+        )
 
     def _write(self, data: bytes) -> None:
         if len(data) < 8:
@@ -116,10 +136,10 @@ class UsbTransport(Transport):
         return {**super().describe(), "vid": f"{self.vid:04x}", "pid": f"{self.pid:04x}"}
 
 
-def _serial_of(device: Any) -> str | None:
+def string_descriptor(device: Any, name: str) -> str | None:
+    """A string descriptor (pyusb's ``serial_number``, ``product``), None when unreadable."""
     try:
-        import usb.util
-
-        return str(usb.util.get_string(device, device.iSerialNumber))
-    except Exception:  # devices without a readable serial string
+        value = getattr(device, name)
+    except Exception:  # pyusb raises ValueError/USBError without permission or descriptor
         return None
+    return None if value is None else str(value)

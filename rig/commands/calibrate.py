@@ -248,6 +248,8 @@ def cmd_select(args: argparse.Namespace) -> int:
     from calibration.spectra import resample
     from calibration.store import CalibrationStore
 
+    if args.top < 1:
+        raise RigError(f"--top {args.top} must be at least 1", "give the number of rows to show")
     root = _store_root(args)
     store = CalibrationStore(root) if (root / "index.yaml").exists() else None
     if store is None:

@@ -15,7 +15,9 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from drivers.lights.udmx import UDMX_PRODUCT
 from drivers.registry import OCEAN_VID, USB_IDS
+from drivers.transports.usb_device import string_descriptor
 
 
 @dataclass(frozen=True)
@@ -91,9 +93,12 @@ def probe_usb() -> tuple[list[Found], list[str]]:
     for dev in devices:
         match = _driver_for(dev.idVendor, dev.idProduct)
         if match and match[0] in {"udmx", "seabreeze"}:
+            product = string_descriptor(dev, "product")
+            if match[0] == "udmx" and product not in (None, UDMX_PRODUCT):
+                continue  # another V-USB device on the shared id (e.g. a USBasp programmer)
             address = f"bus {dev.bus} device {dev.address}"
             ids = f"[{dev.idVendor:04x}:{dev.idProduct:04x}]"
-            rows.append(Found("usb", address, f"{match[1]} {ids}", match[0]))
+            rows.append(Found("usb", address, f"{product or match[1]} {ids}", match[0]))
     return rows, []
 
 

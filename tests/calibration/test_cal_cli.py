@@ -101,6 +101,8 @@ def test_bad_import_is_one_line_error(workdir: Path, capsys: pytest.CaptureFixtu
     rc = main(["calibrate", "import", str(bad), "--kind", "light", "--name", "x"])
     err = capsys.readouterr().err
     assert rc == 2 and "not increasing" in err and "Traceback" not in err
+    assert main(["calibrate", "select", "--top", "0"]) == 2
+    assert "--top 0 must be at least 1" in capsys.readouterr().err
 
 
 def test_parser_constants_match_the_library() -> None:

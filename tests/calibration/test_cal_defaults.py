@@ -56,6 +56,8 @@ def test_illuminations_are_channel_mixes() -> None:
         defaults.illumination_spd({"x": 1.0}, ch)
     with pytest.raises(RigError, match="outside 0..1"):
         defaults.illumination_spd({"r": 2.0}, ch)
+    with pytest.raises(RigError, match="'r' level 'full' is not a number"):
+        defaults.illumination_spd({"r": "full"}, ch)  # type: ignore[dict-item]
 
 
 def test_reflectance_sets_and_illuminants() -> None:

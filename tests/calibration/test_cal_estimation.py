@@ -90,5 +90,7 @@ def test_shape_errors(basis: SpectralBasis, responses: np.ndarray) -> None:
         estimate_reflectance(np.zeros((5, 3, 3)), responses[:, :, :30], basis)
     with pytest.raises(RigError, match="shading has shape"):
         estimate_reflectance(np.zeros((5, 3, 3)), responses, basis, shading=np.ones((4, 3)))
+    with pytest.raises(RigError, match="smoothness -1 is negative"):
+        estimate_reflectance(np.zeros((5, 3, 3)), responses, basis, -1.0)
     with pytest.raises(RigError, match="not on the same grid"):
         response_matrices(np.ones((31, 3)), np.ones((2, 30)))

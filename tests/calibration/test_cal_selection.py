@@ -83,3 +83,5 @@ def test_mixtures_and_limits(setup: Setup) -> None:
         rank_illumination_sets({}, camera, refl, basis)
     with pytest.raises(RigError, match="no camera signal"):
         rank_illumination_sets({"off": np.zeros(31)}, camera, refl, basis)
+    with pytest.raises(RigError, match="smoothness -1 is negative"):
+        rank_illumination_sets(lights, camera, refl, basis, smoothness=-1.0)

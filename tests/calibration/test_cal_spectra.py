@@ -70,6 +70,15 @@ def test_extrapolation_only_when_asked() -> None:
     assert out[-1] == pytest.approx(1.0) and out[-2] == pytest.approx(1.0)
 
 
+def test_extrapolated_data_off_the_grid_is_sampled_at_the_grid() -> None:
+    # starts inside the grid at a wavelength that is not a grid point (a 3 nm spectrometer)
+    w = np.arange(403.0, 695.0, 3.0)
+    out = resample(w, smooth(w), extrapolate=True, band_average=False)
+    inside = (GRID_W >= w[0]) & (GRID_W <= w[-1])
+    np.testing.assert_allclose(out[inside], smooth(GRID_W[inside]), atol=1e-3)
+    assert out[0] == pytest.approx(smooth(w[0])) and out[-1] == pytest.approx(smooth(w[-1]))
+
+
 @pytest.mark.parametrize(
     ("w", "v", "message"),
     [

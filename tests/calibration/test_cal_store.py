@@ -37,6 +37,11 @@ def test_add_read_and_version(tmp_path: Path) -> None:
     assert [(e.name, e.version) for e in again.entries()] == [("LED1", 1), ("LED1", 2)]
     assert [e.version for e in again.entries(all_versions=False)] == [2]
     assert store.light_spd("LED1", SpectralGrid(400, 700, 5)).shape == (61,)
+    # names that slug to the same file name get their own files
+    spaced = store.add_light("bulb a", W, spd(500), {})
+    underscored = store.add_light("bulb_a", W, spd(520), {})
+    assert spaced.file == "lights/bulb_a.v1.csv" and underscored.file != spaced.file
+    assert grid[np.argmax(store.light_spd("bulb_a"))] == 520
 
 
 def test_camera_entries(tmp_path: Path) -> None:
@@ -101,6 +106,20 @@ def test_malformed_index(tmp_path: Path) -> None:
     )
     with pytest.raises(RigError, match="entry 1 is malformed"):
         CalibrationStore(tmp_path)
+    record = {
+        "name": "L",
+        "kind": "light",
+        "version": "two",
+        "file": "lights/L.v1.csv",
+        "added": "2026-01-01",
+        "sha256": "0" * 64,
+        "provenance": {},
+    }
+    (tmp_path / "index.yaml").write_text(
+        yaml.safe_dump({"format": "spectral-rig-calibration/1", "entries": [record]})
+    )
+    with pytest.raises(RigError, match="'L' has version 'two'"):
+        CalibrationStore(tmp_path)
 
 
 def test_default_store_and_snapshot(tmp_path: Path) -> None:
@@ -122,3 +141,8 @@ def test_default_store_and_snapshot(tmp_path: Path) -> None:
         store.copy_to(tmp_path / "session" / "calibration")
     with pytest.raises(RigError, match="already holds a calibration store"):
         CalibrationStore.create_default(tmp_path / "default")
+    empty = CalibrationStore(tmp_path / "never-written").copy_to(tmp_path / "empty-snapshot")
+    assert empty.names() == [] and (tmp_path / "empty-snapshot" / "index.yaml").exists()
+    (store.root / store.entry("LED1").file).unlink()
+    with pytest.raises(RigError, match="cannot copy calibration file .*'LED1' v1"):
+        store.copy_to(tmp_path / "session2")

@@ -14,7 +14,8 @@ from PIL import Image
 
 from calibration.errors import RigError
 from drivers.cameras.exif import read_exif
-from drivers.cameras.folder_watch import FolderWatchCamera
+from drivers.cameras.files import copy_durably, write_durably
+from drivers.cameras.folder_watch import FolderWatchCamera, frame_from_files
 from drivers.cameras.gphoto2_camera import Gphoto2Camera, parse_shutter
 from drivers.cameras.handheld import HandheldImportCamera, match_files_to_frames
 from drivers.protocols import Camera
@@ -180,6 +181,18 @@ def test_profile_camera_settings_pick_the_cameras_own_choices(monkeypatch) -> No
         Gphoto2Camera(gp=fake_gphoto2(FakeCamera()), settings={"exposure_s": 2.0})
 
 
+def test_failed_frame_write_is_a_rig_error_and_leaves_no_part_file(tmp_path: Path) -> None:
+    source = tmp_path / "shot.cr2"
+    source.write_bytes(b"raw")
+    with pytest.raises(RigError, match="cannot write a copy of .*shot.cr2"):
+        copy_durably(source, tmp_path / "missing-dir" / "frame.cr2")
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "frame.cr2.part").mkdir()  # the temporary name cannot be written
+    with pytest.raises(RigError, match="check disk space"):
+        write_durably(tmp_path / "out" / "frame.cr2", b"raw")
+    assert source.exists() and not (tmp_path / "out" / "frame.cr2").exists()
+
+
 def test_parse_shutter() -> None:
     assert parse_shutter("1/250") == pytest.approx(0.004)
     assert parse_shutter('2.5"') == 2.5
@@ -242,11 +255,15 @@ def test_folder_watch_times_out_when_nothing_arrives(tmp_path: Path) -> None:
 
 
 # -- EXIF and hand-held import -------------------------------------------------------------------
-def write_jpeg(path: Path, taken: str, exposure: float = 0.02, iso: int = 400) -> None:
+def write_jpeg(
+    path: Path, taken: str, exposure: float = 0.02, iso: int = 400, offset: str | None = None
+) -> None:
     exif = Image.Exif()
     exif[0x0110] = "Test Cam"
     ifd = exif.get_ifd(0x8769)
     ifd[0x9003] = taken
+    if offset:
+        ifd[0x9011] = offset  # OffsetTimeOriginal
     ifd[0x829A] = exposure
     ifd[0x8827] = iso
     Image.new("RGB", (8, 8)).save(path, exif=exif)
@@ -255,12 +272,18 @@ def write_jpeg(path: Path, taken: str, exposure: float = 0.02, iso: int = 400) -
 def test_exif_from_jpeg_and_from_a_real_dng(tmp_path: Path, shared_data: Path) -> None:
     write_jpeg(tmp_path / "a.jpg", "2024:05:01 10:00:03")
     info = read_exif(tmp_path / "a.jpg")
-    assert info.taken == datetime(2024, 5, 1, 10, 0, 3)
+    assert info.taken == datetime(2024, 5, 1, 10, 0, 3).astimezone()  # no offset: local time
     assert (info.exposure_s, info.iso, info.model) == (0.02, 400.0, "Test Cam")
     dng = read_exif(shared_data / "raw" / "colorchart.dng")
     assert dng.model == "Canon EOS Kiss X4"
     assert dng.exposure_s is None and dng.taken is None  # zero/empty fields are not guessed
     assert read_exif(tmp_path / "missing.cr2").taken is None
+
+
+def test_frame_timestamps_are_utc_using_the_exif_offset(tmp_path: Path) -> None:
+    write_jpeg(tmp_path / "a.jpg", "2024:05:01 10:00:03", offset="+02:00")
+    frame = frame_from_files([tmp_path / "a.jpg"], None, None, "unknown")
+    assert frame.timestamp == "2024-05-01T08:00:03+00:00"
 
 
 def test_handheld_import_orders_by_exif_time_not_name(tmp_path: Path) -> None:

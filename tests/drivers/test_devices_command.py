@@ -102,6 +102,8 @@ def test_hid_and_usb_probes_with_fake_libraries(monkeypatch) -> None:
         return [
             SimpleNamespace(idVendor=0x16C0, idProduct=0x05DC, bus=1, address=4),
             SimpleNamespace(idVendor=0x2457, idProduct=0x101E, bus=1, address=5),
+            # a USBasp programmer on V-USB's shared id is not offered as a uDMX
+            SimpleNamespace(idVendor=0x16C0, idProduct=0x05DC, bus=1, address=6, product="USBasp"),
         ]
 
     monkeypatch.setitem(

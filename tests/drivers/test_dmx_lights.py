@@ -3,6 +3,8 @@ Velleman K8062 (8-byte HID reports)."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 from calibration.errors import RigError
@@ -88,6 +90,10 @@ def test_bad_channel_maps_are_rejected() -> None:
         EnttecDmxPro(ScriptedTransport([]), {"r": 513}, identify=False)
     with pytest.raises(RigError, match="both a channel and fixed"):
         EnttecDmxPro(ScriptedTransport([]), {"r": 1}, fixed={1: 255}, identify=False)
+    for bad in (256, "full", 127.5):  # as a profile might write them
+        fixed: dict[int, Any] = {6: bad}
+        with pytest.raises(RigError, match="fixed.6 = .* is not a DMX value"):
+            EnttecDmxPro(ScriptedTransport([]), {"r": 1}, fixed=fixed, identify=False)
     with pytest.raises(RigError, match="illuminations.X names unknown channel"):
         EnttecDmxPro(ScriptedTransport([]), {"r": 1}, {"X": {"c": 1}}, identify=False)
 
@@ -106,9 +112,14 @@ def test_udmx_sends_one_set_channel_range_control_transfer() -> None:
         light.off()
 
 
-def test_k8062_reports_for_a_short_frame() -> None:
-    with ScriptedTransport([(bytes([4, 1, 0, 0, 0, 255, 0, 0]), None)]) as t:
-        VellemanK8062(t, CHANNELS, ILLUMINATIONS).set_illumination("LED1")
+def test_k8062_sends_each_frame_twice_so_the_widget_outputs_it() -> None:
+    # The widget outputs a frame only when the next one starts: the second copy releases it.
+    cool = bytes([4, 1, 0, 0, 0, 255, 0, 0])
+    dark = bytes([4, 1, 0, 0, 0, 0, 0, 0])
+    with ScriptedTransport([(cool, None), (cool, None), (dark, None), (dark, None)]) as t:
+        light = VellemanK8062(t, CHANNELS, ILLUMINATIONS)
+        light.set_illumination("LED1")
+        light.off()
 
 
 def test_k8062_compresses_leading_zeros_and_sends_trailing_slots_singly() -> None:
@@ -116,7 +127,8 @@ def test_k8062_compresses_leading_zeros_and_sends_trailing_slots_singly() -> Non
     # remain after them, so it skips 18 (sent as 19: the start code counts) and carries
     # slots 19..24.
     channels = {"r": 20, "g": 21, "b": 22, "c": 23, "w": 24}
-    with ScriptedTransport([(bytes([4, 19, 0, 10, 20, 30, 40, 50]), None)]) as t:
+    start = bytes([4, 19, 0, 10, 20, 30, 40, 50])
+    with ScriptedTransport([(start, None), (start, None)]) as t:
         VellemanK8062(t, channels).set_levels(
             {k: v / 255 for k, v in zip("rgbcw", (10, 20, 30, 40, 50), strict=True)}
         )

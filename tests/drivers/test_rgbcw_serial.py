@@ -34,6 +34,13 @@ def test_boot_banner_and_a_first_silent_try_are_tolerated() -> None:
         RgbcwSerialLight(t)
 
 
+def test_id_lost_in_the_reset_is_asked_again_after_the_banner() -> None:
+    # The board resets when the port opens: the first ID? is lost, READY comes, then silence.
+    script = [(b"ID?\n", b"READY\n"), (b"ID?\n", ID_LINE)]
+    with ScriptedTransport(script) as t:
+        RgbcwSerialLight(t)
+
+
 def test_err_reply_becomes_a_rig_error_with_the_reason() -> None:
     script = [
         (b"ID?\n", ID_LINE),

@@ -16,7 +16,8 @@ from drivers.spectrometers.seabreeze_spectrometer import SeabreezeSpectrometer
 
 
 class FakeOceanSpectrometer:
-    """Mimics seabreeze.spectrometers.Spectrometer: 1000-count offset, signal ∝ time."""
+    """Mimics seabreeze.spectrometers.Spectrometer: 1000-count offset, signal ∝ time, and the
+    first scan after a change of integration time still uses the old time."""
 
     model = "USB2000+"
     serial_number = "USB2+F01234"
@@ -27,6 +28,7 @@ class FakeOceanSpectrometer:
         self._wl = np.linspace(350, 1000, 651)
         self.light_on = True
         self.time_us = 0
+        self.running_us = 0  # the free-running scan under way, started before any change
         self.reads = 0
         self.rng = np.random.default_rng(1)
 
@@ -38,8 +40,9 @@ class FakeOceanSpectrometer:
 
     def intensities(self) -> np.ndarray:
         self.reads += 1
+        used_us, self.running_us = self.running_us, self.time_us
         rate = 4e5 * np.exp(-0.5 * ((self._wl - 550) / 40) ** 2)  # counts per second
-        signal = rate * self.time_us * 1e-6 if self.light_on else 0
+        signal = rate * used_us * 1e-6 if self.light_on else 0
         counts = 1000 + signal + self.rng.normal(0, 2, self._wl.shape)
         return np.minimum(counts, self.max_intensity)
 

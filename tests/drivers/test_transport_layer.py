@@ -88,6 +88,11 @@ def test_malformed_recording_names_the_line(tmp_path) -> None:
         ScriptedTransport.from_jsonl(bad)
     with pytest.raises(RigError, match="does not exist"):
         open_transport({"type": "replay", "file": str(tmp_path / "none.jsonl")})
+    recorded = tmp_path / "good.jsonl"
+    recorded.write_text('{"request": "00", "reply": ""}\n')
+    spec = {"type": "replay", "file": str(recorded), "record": str(tmp_path / "no" / "x.jsonl")}
+    with pytest.raises(RigError, match="cannot write the transport recording"):
+        open_transport(spec)
 
 
 # -- logging and secrets -----------------------------------------------------------------------
@@ -122,6 +127,13 @@ def test_missing_transport_keys_are_a_rig_error() -> None:
         open_transport({"type": "tcp", "host": "127.0.0.1"})
 
 
+def test_bad_transport_values_are_a_rig_error() -> None:
+    with pytest.raises(RigError, match="tcp.*has a bad value"):
+        open_transport({"type": "tcp", "host": "127.0.0.1", "port": "fivefive"})
+    with pytest.raises(RigError, match="has a bad value"):
+        open_transport({"type": "tcp", "host": "127.0.0.1", "port": 1, "timeout_s": "soon"})
+
+
 # -- serial -----------------------------------------------------------------------------------
 def test_serial_port_missing() -> None:
     with pytest.raises(RigError, match="does not exist") as info:
@@ -142,6 +154,31 @@ def test_serial_permission_denied_gives_the_udev_hint() -> None:
     with pytest.raises(RigError, match="permission denied") as info:
         SerialTransport("/dev/ttyUSB0", serial_module=Denied)
     assert "dialout" in str(info.value) and "udev" in str(info.value)
+
+
+def test_serial_write_timeout_and_failure_are_rig_errors() -> None:
+    import serial
+
+    class StuckPort:
+        def __init__(self, **kwargs: object) -> None:
+            self.failure: Exception = serial.SerialTimeoutException("Write timeout")
+
+        def write(self, data: bytes) -> None:
+            raise self.failure
+
+        def read(self, size: int) -> bytes:
+            raise serial.SerialException("device reports readiness to read but returned no data")
+
+    fake = SimpleNamespace(
+        Serial=StuckPort,
+        SerialException=serial.SerialException,
+        SerialTimeoutException=serial.SerialTimeoutException,
+    )
+    t = SerialTransport("/dev/ttyUSB0", serial_module=fake, timeout_s=0.5)
+    with pytest.raises(NotAnsweringError, match="ttyUSB0 did not answer within 0.5 s"):
+        t.write(b"x")
+    with pytest.raises(RigError, match="serial port /dev/ttyUSB0 failed"):
+        t.read(1)
 
 
 # -- TCP ----------------------------------------------------------------------------------------
@@ -196,6 +233,17 @@ def test_subprocess_missing_program() -> None:
         SubprocessTransport("no-such-program-xyz --flag")
 
 
+def test_subprocess_chatty_stderr_does_not_block_the_helper() -> None:
+    # 200 kB of log lines would fill an undrained stderr pipe and freeze the helper
+    code = (
+        "import sys; sys.stderr.write('log line\\n' * 25000); sys.stderr.flush(); "
+        "sys.stdin.readline(); sys.stdout.write('ok\\n'); sys.stdout.flush()"
+    )
+    with SubprocessTransport([sys.executable, "-c", code], timeout_s=10) as t:
+        t.write(b"go\n")
+        assert t.read_until(b"\n") == b"ok\n"
+
+
 def test_subprocess_exit_is_reported_with_its_stderr() -> None:
     code = "import sys; sys.stderr.write('boom'); sys.exit(3)"
     t = SubprocessTransport([sys.executable, "-c", code], timeout_s=5)
@@ -212,10 +260,19 @@ class FakeUsbError(Exception):
 
 
 class FakeUsbDevice:
-    def __init__(self, reply: bytes = b"", error: Exception | None = None) -> None:
+    def __init__(
+        self, reply: bytes = b"", error: Exception | None = None, product: str | None = None
+    ) -> None:
         self.calls: list[tuple] = []
         self.reply = reply
         self.error = error
+        self._product = product
+
+    @property
+    def product(self) -> str:
+        if self._product is None:  # what pyusb raises without permission to read strings
+            raise ValueError("The device has no langid (permission issue, ...)")
+        return self._product
 
     def ctrl_transfer(self, *args: object):
         self.calls.append(args)
@@ -265,10 +322,25 @@ def test_usb_device_absent_or_not_permitted() -> None:
         control_out(t, 0x40, 2, 1, 0, b"\x00")
 
 
+def test_usb_product_string_picks_the_udmx_among_shared_ids() -> None:
+    # 16c0:05dc is V-USB's shared id: a USBasp programmer answers to it as well.
+    usbasp, udmx = FakeUsbDevice(product="USBasp"), FakeUsbDevice(product="uDMX")
+    core = fake_usb_core([usbasp, udmx])
+    control_out(UsbTransport(0x16C0, 0x05DC, product="uDMX", usb_core=core), 0x40, 2, 1, 0, b"\x07")
+    assert udmx.calls and not usbasp.calls
+    with pytest.raises(RigError, match="is 'USBasp', not 'uDMX'"):
+        UsbTransport(0x16C0, 0x05DC, product="uDMX", usb_core=fake_usb_core([usbasp]))
+    unreadable = FakeUsbDevice()  # pyusb cannot read its product string
+    with pytest.raises(RigError, match="permission denied") as info:
+        UsbTransport(0x16C0, 0x05DC, product="uDMX", usb_core=fake_usb_core([unreadable]))
+    assert "udev" in str(info.value)
+
+
 # -- HID ------------------------------------------------------------------------------------------
 class FakeHidDevice:
     def __init__(self, fail_open: bool = False) -> None:
         self.fail_open = fail_open
+        self.unplugged = False
         self.written: list[bytes] = []
 
     def open(self, vid: int, pid: int, serial: str | None) -> None:
@@ -276,10 +348,14 @@ class FakeHidDevice:
             raise OSError("open failed")
 
     def write(self, data: bytes) -> int:
+        if self.unplugged:
+            return -1
         self.written.append(bytes(data))
         return len(data)
 
     def read(self, size: int, timeout_ms: int) -> list[int]:
+        if self.unplugged:
+            raise OSError("read error")
         return [1, 2, 3][:size]
 
     def close(self) -> None:
@@ -299,6 +375,11 @@ def test_hid_reports_get_report_id_zero_prepended() -> None:
     t.write(bytes([4, 1, 255, 0, 0, 0, 0, 0]))
     assert dev.written == [bytes([0, 4, 1, 255, 0, 0, 0, 0, 0])]
     assert t.read(8) == b"\x01\x02\x03"
+    dev.unplugged = True
+    with pytest.raises(RigError, match="writing to HID device 10cf:8062 failed"):
+        t.write(bytes(8))
+    with pytest.raises(RigError, match="reading from HID device 10cf:8062 failed: read error"):
+        t.read(8)
 
 
 def test_hid_absent_or_not_permitted() -> None:
