@@ -7,7 +7,6 @@ building the `rig` parser stays fast for every other command.
 from __future__ import annotations
 
 import argparse
-import importlib
 import re
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -381,12 +380,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("dir", nargs="?", help="directory (default: --store or the default store)")
     p.set_defaults(func=cmd_init_store)
 
-    try:
-        wizard = importlib.import_module("rig.wizard")
-    except ModuleNotFoundError as error:
-        if error.name != "rig.wizard":
-            raise
-        return  # this build has no wizard module
+    from rig import wizard  # imported here so other subcommands start fast
     p = sub.add_parser("wizard", help="guided measurement of the lights and camera")
     wizard.add_arguments(p)
     p.set_defaults(func=wizard.run)

@@ -1,11 +1,81 @@
-"""`rig capture`: guided capture session."""
+"""`rig capture`: guided capture session (resumable; see rig.capture)."""
 
 from __future__ import annotations
 
 import argparse
+import importlib
+from pathlib import Path
 
-from rig.commands._not_built import register
+from rich.console import Console
+
+from calibration.errors import RigError
+from rig.capture import CaptureStopped, run_capture
+from rig.profile import shipped_profiles
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    register(subparsers, "capture", "guided capture session", issue=4)
+    parser = subparsers.add_parser(
+        "capture",
+        help="guided capture session",
+        description="Capture every view under every illumination into a session directory. "
+        "Ctrl-C stops after the frame in flight; --resume continues exactly there.",
+    )
+    parser.add_argument(
+        "--profile",
+        default=None,
+        help=f"shipped profile ({', '.join(shipped_profiles())}) or a YAML file "
+        "(default: sim for a new session)",
+    )
+    where = parser.add_mutually_exclusive_group(required=True)
+    where.add_argument("--out", type=Path, help="new session directory")
+    where.add_argument(
+        "--resume", type=Path, metavar="SESSION", help="continue an interrupted session"
+    )
+    parser.add_argument(
+        "--yes", "-y", action="store_true", help="no prompts (simulated rigs, automation)"
+    )
+    parser.add_argument("--note", default="", help="free text for session.yaml (object, operator)")
+    parser.add_argument("--seed", type=int, default=None, help="simulated scene seed (default 0)")
+    parser.add_argument(
+        "--reconstruct",
+        action="store_true",
+        help="run `rig reconstruct` on the session when the capture ends",
+    )
+    parser.set_defaults(func=handle)
+
+
+def handle(args: argparse.Namespace) -> int:
+    console = Console(stderr=True)
+    session = args.resume if args.resume is not None else args.out
+    profile = args.profile if args.profile is not None or args.resume else "sim"
+    try:
+        out = run_capture(
+            profile,
+            session,
+            yes=args.yes,
+            resume=args.resume is not None,
+            seed=args.seed,
+            console=console,
+            notes=args.note,
+        )
+    except CaptureStopped as stopped:
+        console.print(f"[yellow]{stopped}[/]", highlight=False)
+        return 130
+    print(out)
+    if args.reconstruct:
+        return reconstruct(out)
+    return 0
+
+
+def reconstruct(session: Path) -> int:
+    """Run the reconstruction pipeline on a finished session."""
+    try:
+        pipeline = importlib.import_module("reconstruct.pipeline")
+    except ImportError as exc:
+        raise RigError(
+            "the reconstruction pipeline (reconstruct.pipeline) is not available",
+            f"the frames are safe; run `rig reconstruct {session}` once it is installed",
+        ) from exc
+    pipeline.run_reconstruction(session)
+    print(session / "recon")
+    return 0

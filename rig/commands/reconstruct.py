@@ -1,16 +1,89 @@
-"""`rig reconstruct`: reconstruct a mesh with per-vertex spectral reflectance."""
+"""`rig reconstruct SESSION`: decode → poses → initial mesh → visibility → subdivide →
+joint optimisation → export, outputs in SESSION/recon/."""
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
-from rig.commands._not_built import register
+from rich.console import Console
+from rich.table import Table
+
+from reconstruct.optimise.solver import IterationRecord
+from reconstruct.pipeline import Reconstruction, load_config, run_reconstruction
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    register(
-        subparsers,
+    parser = subparsers.add_parser(
         "reconstruct",
-        "reconstruct a mesh with per-vertex spectral reflectance",
-        issue=6,
+        help="mesh + spectral reflectance per vertex + light position from a session",
+        description="Run both halves of the pipeline on a captured session: decode, poses, "
+        "initial mesh, visibility, √3 subdivision, then the joint optimisation of shape, "
+        "spectral reflectance and light position. Stages resume where they stopped. "
+        "Outputs: SESSION/recon/mesh.ply, reflectance.npz, report.json and PNG plots.",
     )
+    parser.add_argument("session", type=Path, help="session directory (from `rig capture`)")
+    parser.add_argument(
+        "--initial-mesh", type=Path, default=None, help="use this mesh instead of MVS (PLY/OBJ)"
+    )
+    parser.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="YAML with sections decode, poses, mesh, visibility, subdivide, optimise",
+    )
+    parser.set_defaults(func=handle)
+
+
+class ProgressPrinter:
+    """One line per optimiser iteration: stage, each cost term, step, damping, CG, time."""
+
+    def __init__(self, console: Console) -> None:
+        self.console = console
+        self.header = False
+
+    def __call__(self, stage: str, rec: IterationRecord) -> None:
+        if not self.header:
+            self.console.print(
+                "[bold]stage     it   rendering    spectral  photometric   geometric"
+                "        total      step  λ        CG  time[/]"
+            )
+            self.header = True
+        t = rec.terms
+        mark = "" if rec.accepted else " [dim](rejected)[/]"
+        self.console.print(
+            f"{stage:8s} {rec.iteration:3d}  {t['rendering']:10.4e}  {t['spectral']:10.3e}  "
+            f"{t['photometric']:10.3e}  {t['geometric']:10.3e}  {t['total']:11.5e}  "
+            f"{rec.step_norm:8.2e}  {rec.lam:7.1e}  {rec.cg_iterations:3d}  "
+            f"{rec.seconds:5.2f}s{mark}",
+            highlight=False,
+        )
+
+
+def summary(console: Console, rec: Reconstruction) -> None:
+    light = rec.report["light"]
+    table = Table(title="reconstruction", show_header=False)
+    table.add_row(
+        "vertices / observed", f"{rec.report['vertices']} / {rec.report['observed_vertices']}"
+    )
+    if light["offset_m"] is not None:
+        table.add_row(
+            "light offset (camera frame)",
+            ", ".join(f"{v * 100:.2f}" for v in light["offset_m"]) + " cm",
+        )
+    table.add_row(
+        "reflectance scale", "absolute" if rec.report["reflectance_scale_absolute"] else "relative"
+    )
+    table.add_row("time", f"{sum(rec.report['timings_s'].values()):.1f} s")
+    for path in (rec.mesh_path, rec.reflectance_path, rec.report_path, *rec.plots):
+        table.add_row(path.name, str(path))
+    console.print(table)
+
+
+def handle(args: argparse.Namespace) -> int:
+    console = Console(stderr=True)
+    config = load_config(args.config)
+    rec = run_reconstruction(args.session, config, args.initial_mesh, ProgressPrinter(console))
+    summary(console, rec)
+    print(rec.recon_dir)
+    return 0

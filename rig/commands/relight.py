@@ -1,11 +1,105 @@
-"""`rig relight`: render the reconstruction under a new light."""
+"""`rig relight SESSION`: render the reconstruction from a captured view or a new camera under
+a point light of any illuminant, with cast shadows, as an sRGB PNG."""
 
 from __future__ import annotations
 
 import argparse
+import json
+from pathlib import Path
 
-from rig.commands._not_built import register
+import numpy as np
+
+from calibration.errors import RigError
+from reconstruct import export
+from reconstruct.poses import load as load_poses
+from reconstruct.relight import Camera, encode_srgb, load_camera_file, relight, write_png
+from reconstruct.session import RECON_DIR
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    register(subparsers, "relight", "render the reconstruction under a new light", issue=6)
+    parser = subparsers.add_parser(
+        "relight",
+        help="render the reconstruction under a new light (PNG)",
+        description="Render SESSION/recon (mesh + spectral reflectance) from a captured view or "
+        "a camera file, lit by a point light with a CIE illuminant or a measured SPD.",
+    )
+    parser.add_argument("session", type=Path, help="session directory with recon/")
+    which = parser.add_mutually_exclusive_group(required=True)
+    which.add_argument("--view", type=int, help="render from captured view N")
+    which.add_argument(
+        "--camera",
+        type=Path,
+        help="YAML (width, height, focal_px, eye, target) or a COLMAP text model folder",
+    )
+    parser.add_argument(
+        "--light-pos",
+        default=None,
+        help="x,y,z in metres (world); default: the estimated light of the view, or the "
+        "estimated plate offset from --camera",
+    )
+    parser.add_argument(
+        "--illuminant", default="D65", help="CIE name (D65, A, F2, …) or a CSV wavelength_nm,power"
+    )
+    parser.add_argument("--exposure", type=float, default=0.8, help="white at the scene reads this")
+    parser.add_argument(
+        "--out", type=Path, default=None, help="PNG path (default in recon/relight/)"
+    )
+    parser.set_defaults(func=handle)
+
+
+def parse_xyz(text: str, what: str) -> np.ndarray:
+    try:
+        v = np.array([float(x) for x in text.split(",")])
+    except ValueError as error:
+        raise RigError(
+            f"{what} {text!r} is not x,y,z", "give three numbers, e.g. 0.1,0,0.3"
+        ) from error
+    if v.shape != (3,):
+        raise RigError(f"{what} {text!r} has {v.size} numbers", "give three numbers: x,y,z")
+    return v
+
+
+def handle(args: argparse.Namespace) -> int:
+    recon = Path(args.session) / RECON_DIR
+    data = export.read_reflectance_npz(recon / export.REFLECTANCE_FILE)
+    report_path = recon / export.REPORT_FILE
+    if not report_path.is_file():
+        raise RigError(f"{report_path} is missing", f"run `rig reconstruct {args.session}` first")
+    report = json.loads(report_path.read_text())
+    light = report["light"]
+    if args.view is not None:
+        intr, poses, _ = load_poses(recon / "poses")
+        views = sorted(poses)
+        if args.view not in poses:
+            raise RigError(
+                f"view {args.view} has no pose in {recon / 'poses'}",
+                f"choose one of {', '.join(map(str, views))}",
+            )
+        camera = Camera(intr[args.view], poses[args.view])
+        default_light = np.asarray(light["positions_m"][views.index(args.view)])
+        name = f"view{args.view:03d}"
+    else:
+        camera = load_camera_file(args.camera)
+        if light.get("offset_m") is not None:
+            default_light = camera.pose.light_position(np.asarray(light["offset_m"]))
+        else:
+            default_light = camera.pose.center
+        name = args.camera.stem
+    position = default_light if args.light_pos is None else parse_xyz(args.light_pos, "--light-pos")
+    image = relight(
+        np.asarray(data["vertices"], float),
+        np.asarray(data["faces"]),
+        np.asarray(data["reflectance"], float),
+        np.asarray(data["wavelengths_nm"], float),
+        camera,
+        position,
+        args.illuminant,
+        exposure=args.exposure,
+    )
+    illum = (
+        Path(args.illuminant).stem if args.illuminant.lower().endswith(".csv") else args.illuminant
+    )
+    out = args.out or recon / "relight" / f"{name}_{illum}.png"
+    write_png(Path(out), encode_srgb(image))
+    print(out)
+    return 0

@@ -1,11 +1,146 @@
-"""`rig session`: inspect and verify a capture session."""
+"""`rig session`: verify (re-hash every frame) and summarise a capture session."""
 
 from __future__ import annotations
 
 import argparse
+import datetime as dt
+from collections import Counter
+from pathlib import Path
+from typing import Any
 
-from rig.commands._not_built import register
+from rich.console import Console
+
+from reconstruct.session import FrameProblem, Session, sha256_file, verify_frames
+from rig.capture.frames import record_paths
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    register(subparsers, "session", "inspect and verify a capture session", issue=4)
+    parser = subparsers.add_parser("session", help="inspect and verify a capture session")
+    actions = parser.add_subparsers(dest="session_command", metavar="ACTION", required=True)
+    verify = actions.add_parser(
+        "verify", help="re-hash every frame; non-zero exit if any is missing or corrupt"
+    )
+    verify.add_argument("session", type=Path)
+    verify.set_defaults(func=handle_verify)
+    info = actions.add_parser("info", help="views, illuminations, frames, devices, calibration")
+    info.add_argument("session", type=Path)
+    info.set_defaults(func=handle_info)
+
+
+def handle_verify(args: argparse.Namespace) -> int:
+    session = Session.open(args.session)
+    console = Console(soft_wrap=True)
+    problems = verify_frames(session.root, session.frames)
+    problems += companion_problems(session)
+    counts = Counter(r.frame for r in session.frames)
+    duplicates = sorted(f for f, n in counts.items() if n > 1)
+    for problem in problems:
+        console.print(
+            f"{problem.problem:<14} frame {problem.record.frame} (view "
+            f"{problem.record.view + 1}, {problem.record.illumination}): "
+            f"{problem.record.path}",
+            highlight=False,
+        )
+    for frame in duplicates:
+        console.print(f"duplicate      frame {frame} appears {counts[frame]} times")
+    planned = session.info.get("plan", {}).get("frames")
+    missing_planned = (planned - len(counts)) if isinstance(planned, int) else 0
+    ok = not problems and not duplicates
+    summary = (
+        f"{len(session.frames)} frames checked, {len(problems)} missing or corrupt, "
+        f"{len(duplicates)} duplicated"
+    )
+    if missing_planned > 0:
+        summary += (
+            f"; {missing_planned} planned frames not captured yet "
+            f"(`rig capture --resume {session.root}`)"
+        )
+    console.print(
+        ("[green]ok:[/] " if ok else "[bold red]problems:[/] ") + summary, highlight=False
+    )
+    return 0 if ok else 1
+
+
+def companion_problems(session: Session) -> list[FrameProblem]:
+    """Files delivered with a frame (e.g. a JPEG beside the RAW) are checked like the frame."""
+    problems = []
+    for record in session.frames:
+        for other in record.extra.get("other_files", []):
+            file = session.root / other["path"]
+            if not file.is_file():
+                problems.append(FrameProblem(record, f"missing {other['path']}"))
+            elif sha256_file(file) != other["sha256"]:
+                problems.append(FrameProblem(record, f"hash mismatch {other['path']}"))
+    return problems
+
+
+def handle_info(args: argparse.Namespace) -> int:
+    session = Session.open(args.session)
+    console = Console(soft_wrap=True)
+    for line in summarise(session):
+        console.print(line, highlight=False)
+    return 0
+
+
+def summarise(session: Session) -> list[str]:
+    """Human-readable summary lines of a session."""
+    info: dict[str, Any] = session.info
+    plan = info.get("plan", {})
+    frames = session.frames
+    by_label = Counter(f.illumination for f in frames)
+    size = sum(
+        (session.root / p).stat().st_size
+        for f in frames
+        for p in record_paths(f)
+        if (session.root / p).is_file()
+    )
+    rows: list[tuple[str, str]] = [
+        ("session", str(session.root)),
+        ("profile", f"{info.get('profile_name', '?')} ({info.get('profile_source', '?')})"),
+        ("created", str(info.get("created", "?"))),
+        ("views", f"{len(session.views())} of {plan.get('views', '?')} planned"),
+        ("illuminations", ", ".join(f"{k} ×{v}" for k, v in sorted(by_label.items())) or "-"),
+        ("frames", f"{len(frames)} of {plan.get('frames', '?')} planned, {size / 1e6:.1f} MB"),
+        ("duration", _duration(frames)),
+    ]
+    runs = info.get("runs", [])
+    if runs:
+        rows.append(("runs", f"{len(runs)}: " + ", ".join(str(r.get("status")) for r in runs)))
+    for kind, desc in (info.get("devices") or {}).items():
+        desc = dict(desc)
+        driver = desc.pop("driver", "?")
+        details = ", ".join(f"{k}={v}" for k, v in desc.items() if not isinstance(v, (dict, list)))
+        rows.append((kind, f"{driver}: {details}"))
+    cal = info.get("calibration", {}) or {}
+    if cal.get("snapshot"):
+        lights = ", ".join(f"{k}->{v}" for k, v in (cal.get("lights") or {}).items())
+        rows.append(
+            (
+                "calibration",
+                f"{cal.get('store')} (snapshot in {cal['snapshot']}/): camera "
+                f"{cal.get('camera')}; lights {lights}",
+            )
+        )
+    else:
+        rows.append(("calibration", "none recorded"))
+    for check in (info.get("exposure_checks") or {}).values():
+        if check.get("suggestion"):
+            rows.append(("exposure", check["suggestion"]))
+    if info.get("notes"):
+        rows.append(("notes", str(info["notes"])))
+    if info.get("ground_truth"):
+        rows.append(("ground truth", f"{info['ground_truth']}/ (simulated rig)"))
+    return [f"{label:<14}{value}" for label, value in rows]
+
+
+def _duration(frames: list[Any]) -> str:
+    stamps = []
+    for frame in frames:
+        try:
+            stamps.append(dt.datetime.fromisoformat(frame.timestamp))
+        except (TypeError, ValueError):
+            continue
+    if len(stamps) < 2:
+        return "-"
+    seconds = (max(stamps) - min(stamps)).total_seconds()
+    return f"{seconds / 60:.1f} min ({seconds:.0f} s from first to last frame)"

@@ -1,0 +1,221 @@
+"""Guided capture sessions (``rig capture``) as a library call: :func:`run_capture`."""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+
+from calibration.errors import RigError
+from reconstruct.session import POSES_DIR, SESSION_FILE, FrameRecord
+from rig.capture.devices import Ask, RigDevices, open_devices
+from rig.capture.engine import CaptureStopped, RunEngine, RunState
+from rig.capture.session_dir import (
+    FORMAT_VERSION,
+    GROUND_TRUTH_DIR,
+    check_new_session_dir,
+    discard_unstarted_session,
+    new_session_dir,
+    now,
+    prepare_resume,
+    read_info,
+    snapshot_calibration,
+    snapshot_profile,
+    software_versions,
+    write_info,
+)
+from rig.plans import frame_list
+from rig.profile import Profile, load_profile
+
+__all__ = ["CaptureStopped", "DeviceFactory", "run_capture"]
+
+DeviceFactory = Callable[[Profile, int, Ask | None], RigDevices]
+
+
+def run_capture(
+    profile: Profile | str | Path | None,
+    out_dir: Path | str,
+    *,
+    yes: bool = False,
+    resume: bool = False,
+    seed: int | None = None,
+    console: Console | None = None,
+    ask: Ask | None = None,
+    open_rig: DeviceFactory = open_devices,
+    on_frame: Callable[[FrameRecord], None] | None = None,
+    notes: str = "",
+) -> Path:
+    """Capture (or with ``resume`` continue) a session into ``out_dir`` and return it.
+
+    ``yes`` runs without prompts (sim, automation); ``ask`` replaces the console prompt;
+    ``open_rig`` replaces device opening (tests, other front ends); ``notes`` go into
+    session.yaml (object, operator, conditions). Raises
+    :class:`CaptureStopped` when the person stops, RigError on any failure — in both cases
+    every completed frame is on disk and ``resume=True`` continues where it stopped."""
+    out = Path(out_dir).expanduser().resolve()
+    console = console or Console(stderr=True)
+    if not yes and ask is None:
+        ask = console.input
+    prompt = None if yes else ask
+    if resume and (out / SESSION_FILE).is_file():
+        info = read_info(out)
+        if profile is not None and not isinstance(profile, Profile):
+            console.print("[dim]resuming with the session's own profile snapshot[/]")
+        profile = snapshot_profile(out)
+        seed = int(info.get("seed", 0)) if seed is None else seed
+        records = prepare_resume(out)
+    else:
+        if profile is None:
+            raise RigError(
+                f"{out} has no session to resume" if resume else "no profile given",
+                "give --profile to start a new session",
+            )
+        if resume:  # killed before session.yaml existed: nothing was captured, start afresh
+            discard_unstarted_session(out)
+        profile = profile if isinstance(profile, Profile) else load_profile(profile)
+        seed = 0 if seed is None else seed
+        check_new_session_dir(out)
+        info = None
+        records = []
+    devices = open_rig(profile, seed, prompt)
+    try:
+        size = (devices.projector.width, devices.projector.height) if devices.projector else None
+        frames = frame_list(profile.plan, size)
+        if info is None:
+            info = _start_session(out, profile, devices, seed, len(frames), size)
+            info["notes"] = notes
+        else:
+            _check_same_plan(out, info, len(frames), size)
+        state = RunState(
+            done={r.frame for r in records},
+            total=len(frames),
+            exposure_checks=dict(info.get("exposure_checks") or {}),
+            views_done=sorted({r.view for r in records}),
+        )
+        run: dict[str, Any] = {
+            "started": now(),
+            "ended": None,
+            "status": "running",
+            "devices": devices.describe(),
+        }
+        info.setdefault("runs", []).append(run)
+        write_info(out, info)
+        engine = RunEngine(
+            out, profile, devices, frames, state, ask=prompt, console=console, on_frame=on_frame
+        )
+        try:
+            engine.run()
+            run["status"] = "complete"
+        except CaptureStopped:
+            run["status"] = "stopped"
+            raise
+        except BaseException as exc:
+            run["status"] = f"failed: {exc}"
+            if isinstance(exc, RigError):
+                raise RigError(
+                    exc.problem,
+                    f"{exc.fix + '; ' if exc.fix else ''}every completed "
+                    f"frame is saved — fix it and run `rig capture --resume {out}`",
+                ) from exc
+            raise
+        finally:
+            run["ended"] = now()
+            run["frames"] = state.captured
+            info["exposure_checks"] = state.exposure_checks
+            info["frames_done"] = len(state.done)
+            write_info(out, info)
+    finally:
+        devices.close()
+    console.print(f"[green]capture complete:[/] {len(state.done)} frames in {out}")
+    return out
+
+
+def _start_session(
+    out: Path,
+    profile: Profile,
+    devices: RigDevices,
+    seed: int,
+    n_frames: int,
+    projector_size: tuple[int, int] | None,
+) -> dict[str, Any]:
+    """Create the session directory; if setting it up fails (a missing calibration entry...),
+    remove it again so the same --out can be used once the problem is fixed."""
+    new_session_dir(out)
+    try:
+        return _new_info(out, profile, devices, seed, n_frames, projector_size)
+    except BaseException:
+        discard_unstarted_session(out)
+        out.rmdir()
+        raise
+
+
+def _check_same_plan(
+    out: Path, info: dict[str, Any], n_frames: int, projector_size: tuple[int, int] | None
+) -> None:
+    """Frame numbers are only the resume point if the plan expands the same way."""
+    plan = info.get("plan", {})
+    recorded = plan.get("projector_size")
+    if plan.get("frames") != n_frames or (recorded and tuple(recorded) != projector_size):
+        raise RigError(
+            f"{out}: the rig now plans {n_frames} frames (projector {projector_size}), the "
+            f"session was started with {plan.get('frames')} (projector {recorded})",
+            "resume with the same projector resolution, or start a new session",
+        )
+
+
+def _new_info(
+    out: Path,
+    profile: Profile,
+    devices: RigDevices,
+    seed: int,
+    n_frames: int,
+    projector_size: tuple[int, int] | None,
+) -> dict[str, Any]:
+    """session.yaml for a new session; also the calibration snapshot and sim ground truth."""
+    calibration = snapshot_calibration(profile.calibration, out, profile.source)
+    plan = profile.plan
+    info: dict[str, Any] = {
+        "format": FORMAT_VERSION,
+        "created": now(),
+        "profile_name": profile.name,
+        "profile_source": profile.source,
+        "profile": dict(profile.data),
+        "seed": seed,
+        "plan": {
+            "views": plan.views,
+            "illuminations": list(plan.illuminations),
+            "ambient": plan.ambient,
+            "structured_light": bool(plan.structured_light),
+            "frames": n_frames,
+            "projector_size": list(projector_size) if projector_size else None,
+        },
+        "light_mount": {
+            "type": profile.light_mount.type,
+            "offset_m": list(profile.light_mount.offset_m)
+            if profile.light_mount.offset_m
+            else None,
+        },
+        # reconstruct.poses reads the camera-centre distances as this list (metric scale)
+        "known_distances": [pair.as_dict() for pair in profile.camera_pairs],
+        "known_lengths": dict(profile.known_distances),
+        "calibration": calibration,
+        "software": software_versions(),
+        "devices": devices.describe(),
+        "notes": "",
+    }
+    if devices.sim is not None:
+        devices.sim.write_ground_truth(out / GROUND_TRUTH_DIR)
+        info["ground_truth"] = GROUND_TRUTH_DIR
+        if profile.poses == "known":
+            _write_known_poses(out)
+            info["poses"] = POSES_DIR
+    return info
+
+
+def _write_known_poses(out: Path) -> None:
+    """SESSION/poses/: the sim's true poses (COLMAP text, images named as the decode stage
+    names views)."""
+    shutil.copytree(out / GROUND_TRUTH_DIR / POSES_DIR, out / POSES_DIR)

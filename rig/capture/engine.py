@@ -1,0 +1,330 @@
+"""The run loop: interpret a plan's messages against the devices, record every frame, stop
+cleanly on Ctrl-C, leave a resumable session on any failure."""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+
+from calibration.errors import RigError
+from drivers.protocols import LightSource
+from reconstruct.session import RAW_DIR, FrameRecord
+from rig.capture.devices import Ask, RigDevices, device_errors
+from rig.capture.frames import INCOMING, ExposureCheck, check_exposure, read_raw, store_frame
+from rig.plans import (
+    FrameSpec,
+    MoveTo,
+    Msg,
+    SetLight,
+    ShowPattern,
+    Trigger,
+    capture_plan,
+    pattern_image,
+)
+from rig.profile import Profile
+
+AZIMUTH_BINS = 12
+CAPTURE_ATTEMPTS = 3
+BLOCKS = " ▁▂▃▄▅▆▇█"
+
+
+class CaptureStopped(RigError):
+    """The person stopped the capture (Ctrl-C or 'q'); the session is resumable."""
+
+
+@dataclass
+class RunState:
+    """What the loop has done in this run; the session records it."""
+
+    done: set[int]
+    total: int
+    captured: int = 0
+    exposure_checks: dict[str, dict[str, Any]] = field(default_factory=dict)
+    views_done: list[int] = field(default_factory=list)
+
+
+class StopRequest:
+    """First Ctrl-C (or SIGTERM): finish the frame in flight, then stop. Second Ctrl-C: stop
+    now, the frame in flight is discarded (its files are orphans, removed on resume)."""
+
+    def __init__(self, console: Console) -> None:
+        self.requested = False
+        self._console = console
+
+    def __call__(self, signum: int, frame: Any) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        self._console.print(
+            "[yellow]stopping after the frame in flight "
+            "(Ctrl-C again to discard it and stop now)[/]"
+        )
+
+    @contextmanager
+    def installed(self) -> Iterator[None]:
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        previous = {s: signal.signal(s, self) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            yield
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+
+
+def view_directions(devices: RigDevices, profile: Profile) -> list[tuple[float, float]]:
+    """(azimuth, elevation) per view: the sim's true trajectory when there is one, else the
+    profile's planned rings."""
+    n = profile.plan.views
+    poses = getattr(devices.sim, "poses", None)
+    if poses is not None and len(poses) >= n:
+        trajectory = getattr(devices.sim, "trajectory", None)
+        target = np.asarray(getattr(trajectory, "target_m", (0.0, 0.0, 0.0)), dtype=float)
+        rel = np.array([np.asarray(p.center, dtype=float) for p in list(poses)[:n]]) - target
+        az = np.degrees(np.arctan2(rel[:, 1], rel[:, 0])) % 360.0
+        el = np.degrees(np.arctan2(rel[:, 2], np.hypot(rel[:, 0], rel[:, 1])))
+        return list(zip(az.tolist(), el.tolist(), strict=True))
+    return [profile.plan.trajectory.view_direction(v, n) for v in range(n)]
+
+
+def coverage_hint(directions: list[tuple[float, float]], done: list[int], view: int) -> str:
+    """One line: an azimuth histogram of the views captured so far and where this one goes."""
+    counts = np.zeros(AZIMUTH_BINS, dtype=int)
+    for v in done:
+        counts[int(directions[v][0] // (360 / AZIMUTH_BINS)) % AZIMUTH_BINS] += 1
+    top = max(int(counts.max()), 1)
+    bars = "".join(BLOCKS[int(round(c / top * (len(BLOCKS) - 1)))] for c in counts)
+    elevations = sorted({round(directions[v][1]) for v in done})
+    az, el = directions[view]
+    return (
+        f"coverage so far: azimuth 0°[{bars}]360°, elevations {elevations or '-'}; "
+        f"this view: azimuth {round(az) % 360}°, elevation {el:.0f}°"
+    )
+
+
+def _lit(levels: Mapping[str, float]) -> dict[str, float]:
+    return {k: float(v) for k, v in levels.items() if v > 0}
+
+
+class RunEngine:
+    """Interprets plan messages (Bluesky's RunEngine, reduced to what a capture needs)."""
+
+    def __init__(
+        self,
+        session_dir: Path,
+        profile: Profile,
+        devices: RigDevices,
+        frames: list[FrameSpec],
+        state: RunState,
+        *,
+        ask: Ask | None,
+        console: Console,
+        on_frame: Callable[[FrameRecord], None] | None = None,
+    ) -> None:
+        self.session_dir = session_dir
+        self.profile = profile
+        self.devices = devices
+        self.frames = frames
+        self.state = state
+        self.ask = ask
+        self.console = console
+        self.on_frame = on_frame
+        self.stop = StopRequest(console)
+        self.directions = view_directions(devices, profile)
+        self.progress: Progress | None = None
+
+    def run(self) -> RunState:
+        progress = Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+            console=self.console,
+            transient=False,
+        )
+        self.progress = progress
+        task = progress.add_task("capture", total=self.state.total, completed=len(self.state.done))
+        messages = capture_plan(self.frames, self.state.done, self.profile.plan.views)
+        with self.stop.installed(), progress:
+            try:
+                self._interpret(messages, progress, task)
+            except KeyboardInterrupt:  # second Ctrl-C: the frame in flight is discarded
+                raise self._stopped("the frame in flight was discarded") from None
+        self._switch_off()
+        return self.state
+
+    def _interpret(self, messages: Iterator[Msg], progress: Progress, task: TaskID) -> None:
+        for msg in messages:
+            if self.stop.requested:
+                raise self._stopped()
+            if isinstance(msg, MoveTo):
+                self._move_to(msg)
+            elif isinstance(msg, SetLight):
+                self._set_light(msg.illumination)
+            elif isinstance(msg, ShowPattern):
+                self._show_pattern(msg.pattern)
+            elif isinstance(msg, Trigger):
+                self._trigger(msg.spec)
+                progress.update(
+                    task,
+                    advance=1,
+                    description=f"view {msg.spec.view + 1}/"
+                    f"{self.profile.plan.views} {msg.spec.label}",
+                )
+
+    def _stopped(self, note: str = "") -> CaptureStopped:
+        self._switch_off()
+        done = len(self.state.done)
+        return CaptureStopped(
+            f"capture stopped after {done} of {self.state.total} frames "
+            f"({self.state.captured} in this run); every completed frame is saved"
+            + (f", {note}" if note else ""),
+            f"resume with `rig capture --resume {self.session_dir}`",
+        )
+
+    def _prompt(self, text: str) -> str:
+        assert self.ask is not None
+        if self.progress is not None:
+            self.progress.stop()
+        default = signal.getsignal(signal.SIGINT)
+        in_main = threading.current_thread() is threading.main_thread()
+        if in_main:  # Ctrl-C at a prompt stops at once: nothing is in flight
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+        try:
+            return self.ask(text)
+        except (KeyboardInterrupt, EOFError):
+            raise self._stopped() from None
+        finally:
+            if in_main:
+                signal.signal(signal.SIGINT, default)
+            if self.progress is not None:
+                self.progress.start()
+
+    def _move_to(self, msg: MoveTo) -> None:
+        hint = coverage_hint(self.directions, self.state.views_done, msg.view)
+        if self.ask is not None and self.devices.sim is None:
+            light = (
+                ", hold the light at a new place on the camera's side"
+                if self.profile.light_mount.type == "free"
+                else ""
+            )
+            answer = self._prompt(
+                f"Move the plate to view {msg.view + 1}/{msg.n_views}{light} "
+                f"({hint}) and press Enter (q + Enter to stop) "
+            )
+            if answer.strip().lower() in ("q", "quit", "stop"):
+                raise self._stopped()
+        else:
+            self.console.print(f"view {msg.view + 1}/{msg.n_views}: {hint}", highlight=False)
+        with device_errors("sim", "sim", f"move to view {msg.view}"):
+            self.devices.goto_view(msg.view)
+        if msg.view not in self.state.views_done:
+            self.state.views_done.append(msg.view)
+
+    def _set_light(self, illumination: str | None) -> None:
+        light, projector = self.devices.light, self.devices.projector
+        if light is not None:
+            if projector is not None:
+                with device_errors("projector", self.devices.names["projector"], "blank"):
+                    projector.blank()
+            with device_errors(
+                "light", self.devices.names["light"], f"switch to {illumination or 'off'}"
+            ):
+                if illumination is None:
+                    light.off()
+                else:
+                    self._switch_light(light, illumination)
+        elif projector is not None:
+            levels = self.profile.illuminations.get(illumination or "", {})
+            rgb = np.array([levels.get(c, 0.0) for c in ("r", "g", "b")])
+            image = np.broadcast_to(rgb, (projector.height, projector.width, 3)).copy()
+            with device_errors(
+                "projector", self.devices.names["projector"], f"show {illumination or 'black'}"
+            ):
+                projector.show(image) if illumination else projector.blank()
+        if self.profile.plan.settle_s > 0:
+            time.sleep(self.profile.plan.settle_s)
+
+    def _switch_light(self, light: LightSource, name: str) -> None:
+        """By name when the light knows this illumination with the profile's levels (named
+        prompts, the driver's settle time), else by the profile's channel levels."""
+        levels = self.profile.illuminations[name]
+        known = dict(getattr(light, "illuminations", {}) or {}).get(name)
+        if known is not None and _lit(known) == _lit(levels):
+            light.set_illumination(name)
+        else:
+            light.set_levels(levels)
+
+    def _show_pattern(self, pattern: str) -> None:
+        projector = self.devices.projector
+        assert projector is not None
+        with device_errors("projector", self.devices.names["projector"], f"show {pattern}"):
+            projector.show(pattern_image(pattern, projector.width, projector.height))
+        if self.profile.plan.settle_s > 0:
+            time.sleep(self.profile.plan.settle_s)
+
+    def _trigger(self, spec: FrameSpec) -> None:
+        """Capture and store one frame; a file that fails verification (a torn download) is
+        discarded and the frame shot again, up to CAPTURE_ATTEMPTS times."""
+        incoming = self.session_dir / RAW_DIR / INCOMING
+        where = f"frame {spec.frame} (view {spec.view + 1}, {spec.label})"
+        for attempt in range(1, CAPTURE_ATTEMPTS + 1):
+            stem = f"f{spec.frame:05d}" + (f"_{attempt}" if attempt > 1 else "")
+            with device_errors("camera", self.devices.names["camera"], f"capture {where}"):
+                captured = self.devices.camera.capture(incoming, stem)
+            try:
+                record = store_frame(self.session_dir, spec, captured)
+                break
+            except RigError as exc:
+                for path in captured.paths:
+                    Path(path).unlink(missing_ok=True)
+                if attempt == CAPTURE_ATTEMPTS:
+                    raise RigError(f"{where}: {exc.problem}", exc.fix) from exc
+                self.console.print(
+                    f"[yellow]{where}: {exc.problem} — capturing it again[/]", highlight=False
+                )
+        self.state.done.add(spec.frame)
+        self.state.captured += 1
+        if spec.kind == "illumination" and spec.label not in self.state.exposure_checks:
+            check = self._check_exposure(record, spec)
+            self.state.exposure_checks[spec.label] = check.as_dict()
+        if self.on_frame is not None:
+            self.on_frame(record)
+
+    def _check_exposure(self, record: FrameRecord, spec: FrameSpec) -> ExposureCheck:
+        check = check_exposure(
+            read_raw(self.session_dir / record.path), spec.label, record.exposure_s
+        )
+        if check.suggestion:
+            self.console.print(f"[yellow]exposure:[/] {check.suggestion}", highlight=False)
+        return check
+
+    def _switch_off(self) -> None:
+        try:
+            if self.devices.light is not None:
+                self.devices.light.off()
+            if self.devices.projector is not None:
+                self.devices.projector.blank()
+        except Exception:  # switching off is a courtesy; the session is already safe
+            return

@@ -1,0 +1,218 @@
+"""The capture side of the session directory: create it, snapshot what the run depends on
+(profile, calibration, software, devices) and prepare a resume (manifest repair, orphans)."""
+
+from __future__ import annotations
+
+import datetime as dt
+import importlib
+import os
+import platform
+import shutil
+import sys
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from calibration.errors import RigError
+from reconstruct.session import (
+    CALIBRATION_DIR,
+    MANIFEST_FILE,
+    POSES_DIR,
+    RAW_DIR,
+    SESSION_FILE,
+    FrameRecord,
+    fsync_dir,
+    read_manifest,
+    write_bytes_atomically,
+)
+from rig import __version__
+from rig.capture.frames import INCOMING, record_paths
+from rig.profile import CalibrationChoice, Profile, parse_profile
+
+FORMAT_VERSION = 1
+GROUND_TRUTH_DIR = "ground_truth"  # sim sessions only: the true scene, for evaluation
+
+
+def now() -> str:
+    return dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def software_versions() -> dict[str, str]:
+    """Versions that can change what a session's files mean, for provenance."""
+    versions = {
+        "spectral-rig": __version__,
+        "python": sys.version.split()[0],
+        "platform": platform.platform(),
+    }
+    for module in ("numpy", "scipy", "rawpy", "colour", "pycolmap", "trimesh", "tifffile"):
+        try:
+            versions[module] = str(importlib.import_module(module).__version__)
+        except (ImportError, AttributeError):
+            continue
+    try:
+        import rawpy
+
+        versions["libraw"] = ".".join(map(str, rawpy.libraw_version))
+    except (ImportError, AttributeError):
+        pass
+    return versions
+
+
+def write_info(session_dir: Path, info: dict[str, Any]) -> None:
+    text = yaml.safe_dump(info, sort_keys=False, allow_unicode=True)
+    write_bytes_atomically(session_dir / SESSION_FILE, text.encode("utf-8"))
+
+
+def read_info(session_dir: Path) -> dict[str, Any]:
+    path = session_dir / SESSION_FILE
+    try:
+        info = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError) as exc:
+        raise RigError(
+            f"{path} cannot be read ({exc})",
+            "restore it from a backup; the frames in raw/ are intact",
+        ) from exc
+    if not isinstance(info, dict) or "profile" not in info:
+        raise RigError(
+            f"{path} has no profile snapshot",
+            "it was not written by `rig capture`; start a new session",
+        )
+    return info
+
+
+def snapshot_profile(session_dir: Path) -> Profile:
+    """The profile the session was started with (a resume never re-reads the profile file)."""
+    info = read_info(session_dir)
+    return parse_profile(info["profile"], f"{session_dir / SESSION_FILE} (profile snapshot)")
+
+
+def check_new_session_dir(out_dir: Path) -> None:
+    """``out_dir`` must be new or empty (checked before any device is opened)."""
+    if out_dir.exists() and any(out_dir.iterdir()):
+        if (out_dir / SESSION_FILE).exists():
+            raise RigError(
+                f"{out_dir} already holds a capture session",
+                f"continue it with `rig capture --resume {out_dir}` or choose a new --out folder",
+            )
+        raise RigError(f"{out_dir} exists and is not empty", "choose a new --out folder")
+
+
+def discard_unstarted_session(out_dir: Path) -> None:
+    """Remove what a capture killed before writing session.yaml left behind (no frame can be
+    recorded by then); refuse anything that is not such a leftover."""
+    if not out_dir.exists():
+        return
+    leftovers = {
+        RAW_DIR,
+        CALIBRATION_DIR,
+        GROUND_TRUTH_DIR,
+        POSES_DIR,
+        MANIFEST_FILE,
+        f".{SESSION_FILE}.tmp",
+    }
+    foreign = sorted(p.name for p in out_dir.iterdir() if p.name not in leftovers)
+    manifest = out_dir / MANIFEST_FILE
+    if foreign or (manifest.is_file() and manifest.stat().st_size > 0):
+        raise RigError(
+            f"{out_dir} is not a capture session (no {SESSION_FILE}"
+            + (f"; it holds {', '.join(foreign[:3])}" if foreign else "")
+            + ")",
+            "give the folder `rig capture --out` created, or start a new session with --out",
+        )
+    for path in out_dir.iterdir():
+        shutil.rmtree(path) if path.is_dir() else path.unlink()
+
+
+def new_session_dir(out_dir: Path) -> None:
+    """Create ``out_dir`` with raw/ and raw/.incoming/."""
+    check_new_session_dir(out_dir)
+    (out_dir / RAW_DIR / INCOMING).mkdir(parents=True, exist_ok=True)
+
+
+def snapshot_calibration(
+    choice: CalibrationChoice | None, session_dir: Path, profile_source: str
+) -> dict[str, Any]:
+    """Copy the calibration entries the profile uses into SESSION/calibration/."""
+    if choice is None:
+        return {"snapshot": None, "note": "the profile names no calibration"}
+    try:
+        from calibration.store import CalibrationStore
+    except ImportError as exc:
+        raise RigError(
+            "the calibration store (calibration.store) is not available",
+            "install spectral-rig completely",
+        ) from exc
+    dest = session_dir / CALIBRATION_DIR
+    if choice.store == "default":
+        store = CalibrationStore.create_default(dest)
+    else:
+        root = Path(choice.store).expanduser()
+        if not root.is_absolute():
+            root = Path(profile_source).parent / root
+        if not root.is_dir():
+            raise RigError(
+                f"{profile_source}: calibration.store {root} is not a directory",
+                "run `rig calibrate wizard` to create it, or use store: default",
+            )
+        store = CalibrationStore(root)
+    entries = {"camera": choice.camera, "lights": dict(choice.lights)}
+    try:
+        store.camera(choice.camera)
+        for entry in choice.lights.values():
+            store.light_spd(entry)
+    except RigError as exc:
+        raise RigError(
+            f"{profile_source}: calibration entry missing: {exc.problem}",
+            "add it with `rig calibrate wizard` or fix calibration.lights",
+        ) from exc
+    if choice.store != "default":
+        store.copy_to(dest)
+    return {"store": choice.store, "snapshot": CALIBRATION_DIR, **entries}
+
+
+def prepare_resume(session_dir: Path) -> list[FrameRecord]:
+    """Make the session safe to append to and return its complete frames.
+
+    A torn last manifest line (a kill mid-append) is cut off so the next line starts on its
+    own; files in raw/ that no manifest line owns are orphans of an interrupted frame and are
+    deleted (their frames are captured again)."""
+    _truncate_torn_line(session_dir / MANIFEST_FILE)
+    records = read_manifest(session_dir)
+    seen: set[int] = set()
+    for record in records:
+        if record.frame in seen:
+            raise RigError(
+                f"{session_dir / MANIFEST_FILE} lists frame {record.frame} twice",
+                "the manifest was edited by hand; restore it from a backup",
+            )
+        seen.add(record.frame)
+    owned = {p for r in records for p in record_paths(r)}
+    raw = session_dir / RAW_DIR
+    (raw / INCOMING).mkdir(parents=True, exist_ok=True)
+    for file in raw.iterdir():
+        if file.is_file() and f"{RAW_DIR}/{file.name}" not in owned:
+            file.unlink()
+    shutil.rmtree(raw / INCOMING)
+    (raw / INCOMING).mkdir()
+    missing = [r for r in records if not all((session_dir / p).is_file() for p in record_paths(r))]
+    if missing:
+        raise RigError(
+            f"{len(missing)} frame(s) in the manifest are missing from raw/ "
+            f"(first: frame {missing[0].frame}, {missing[0].path})",
+            f"restore them, or run `rig session verify {session_dir}` for the list",
+        )
+    return records
+
+
+def _truncate_torn_line(path: Path) -> None:
+    if not path.is_file():
+        return
+    data = path.read_bytes()
+    if not data or data.endswith(b"\n"):
+        return
+    with open(path, "rb+") as handle:
+        handle.truncate(data.rfind(b"\n") + 1)
+        handle.flush()
+        os.fsync(handle.fileno())
+    fsync_dir(path.parent)

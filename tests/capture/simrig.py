@@ -1,0 +1,38 @@
+"""Shared helpers for the simulated-rig tests: the tiny profile, running `rig capture` in its
+own process, and the completeness check every kill/resume test ends with."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+from reconstruct.session import read_manifest, verify_frames
+
+PROFILE = Path(__file__).with_name("sim-small.yaml")
+FRAMES = 4 * 4
+
+
+def rig_capture(*args: str) -> subprocess.Popen[bytes]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "rig.cli", "capture", "--yes", *args],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        cwd=Path(__file__).parents[2],
+    )
+
+
+def manifest_lines(session: Path) -> int:
+    path = session / "manifest.jsonl"
+    return path.read_bytes().count(b"\n") if path.is_file() else 0
+
+
+def assert_complete(session: Path) -> None:
+    records = read_manifest(session)
+    counts = Counter(r.frame for r in records)
+    assert sorted(counts) == list(range(FRAMES)), "manifest incomplete"
+    assert max(counts.values()) == 1, "duplicated frames"
+    assert verify_frames(session, records) == []
+    owned = {Path(r.path).name for r in records}
+    assert {p.name for p in (session / "raw").iterdir() if p.is_file()} == owned
