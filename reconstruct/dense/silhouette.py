@@ -1,0 +1,40 @@
+"""Object silhouettes from linear frames of an object on a dark background.
+
+The rig photographs the object lit by a lamp beside the lens; the background is far and
+dark, so the brightest pixels of each view (over all its illuminations) are the object.
+Otsu's threshold on a gamma tone map finds the background, whose noise spread then sets
+the threshold; holes inside the outline (dark paint,
+attached shadows) are filled, since a silhouette is about the outline only.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+
+def silhouette(images: list[np.ndarray], open_px: int = 2) -> np.ndarray:
+    """Linear RGB images of one view -> bool foreground mask (H, W)."""
+    brightness = np.max([img.sum(axis=2) for img in images], axis=0)
+    top = float(np.percentile(brightness, 99.9)) or 1.0
+    u8 = (np.clip(brightness / top, 0.0, 1.0) ** (1.0 / 2.2) * 255.0).astype(np.uint8)
+    otsu, _ = cv2.threshold(u8, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    # Otsu splits object from background halfway and loses the object's dark limb (lit at
+    # grazing angles); the background's own spread is the better limit
+    background = u8[u8 <= otsu].astype(float)
+    level = min(otsu, background.mean() + 4.0 * background.std() + 1.0)
+    mask = (u8 > level).astype(np.uint8) * 255
+    if open_px:
+        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * open_px + 1,) * 2)
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
+    return fill_holes(mask > 0)
+
+
+def fill_holes(mask: np.ndarray) -> np.ndarray:
+    """Everything not reachable from the image border through background is foreground."""
+    h, w = mask.shape
+    padded = np.zeros((h + 2, w + 2), np.uint8)
+    padded[1:-1, 1:-1] = mask.astype(np.uint8)
+    flood = np.zeros((h + 4, w + 4), np.uint8)
+    cv2.floodFill(padded, flood, (0, 0), 2)
+    return np.asarray(padded[1:-1, 1:-1] != 2)

@@ -1,0 +1,367 @@
+"""Poses stage: known poses from ``SESSION/poses/`` or incremental SfM with pycolmap (CPU).
+
+Output in ``recon/poses/``: a COLMAP text model (image id = view + 1, image name
+``view_NNNN.png``, intrinsics at the decoded frames' full resolution), ``poses.json`` (source,
+registered/total views, mean reprojection error, whether the scale is metric or relative) and
+``points3D.npy`` (SfM points, for bounding the dense stage; empty for known poses).
+
+Metric scale: known poses are taken as metres. SfM poses are scaled when the session's
+``session.yaml`` (top level or its ``profile`` snapshot) names ``known_distances``: a list of
+``{views: [a, b], metres: d}``, each the measured distance between the camera centres of two
+views (a tape measure, a turntable radius, a slide rail); the median ratio is applied.
+Without it the scale is relative and reflectance is known only up to one common factor.
+
+Known poses match views by image name: a manifest frame's file path, its file name or stem,
+``view_NNNN[.ext]``, or the view number itself.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+import shutil
+import tempfile
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pycolmap
+
+from calibration.errors import RigError
+from reconstruct.camera import CAMERA_MODELS, Intrinsics, Pose, read_colmap_text, write_colmap_text
+from reconstruct.decode import INDEX, SFM_DIR, DecodeIndex
+from reconstruct.session import Session, write_bytes_atomically
+from reconstruct.stages import quiet_colmap, run_stage
+
+log = logging.getLogger("reconstruct.poses")
+
+SUMMARY = "poses.json"
+POINTS = "points3D.npy"
+MIN_VIEWS = 3
+
+
+@dataclass(frozen=True)
+class PosesConfig:
+    """``use_known``: read ``SESSION/poses`` when present; ``matcher``: exhaustive,
+    sequential or auto (exhaustive up to 60 views); ``max_features``: SIFT features per
+    image; ``refine_intrinsics``: let bundle adjustment refine given intrinsics.
+
+    The defaults suit the rig: a small object turning under a lamp that moves with the camera,
+    so few, strongly changing features. Affine-covariant SIFT with domain-size pooling, guided
+    matching and a 30-inlier initial pair register the simulated 40-view rings fully where
+    COLMAP's photo defaults (upright DoG, 100 inliers) split them into fragments.
+    """
+
+    use_known: bool = True
+    matcher: str = "auto"
+    max_features: int = 8192
+    affine_sift: bool = True
+    guided_matching: bool = True
+    init_min_inliers: int = 30
+    refine_intrinsics: bool = False
+    num_threads: int = -1
+
+    def __post_init__(self) -> None:
+        if self.matcher not in ("auto", "exhaustive", "sequential"):
+            raise RigError(
+                f"poses.matcher {self.matcher!r} is unknown", "use auto, exhaustive or sequential"
+            )
+
+
+@dataclass
+class PoseSummary:
+    source: str  # "known" or "sfm"
+    registered: int
+    total: int
+    registered_views: list[int]
+    unregistered_views: list[int]
+    mean_reprojection_error_px: float | None
+    scale: str  # "metric" or "relative"
+    scale_factor: float
+    intrinsics_source: str
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class SfmResult:
+    """Registered image name -> (intrinsics at the SfM image size, pose); sparse points."""
+
+    cameras: dict[str, tuple[Intrinsics, Pose]]
+    points: np.ndarray
+    mean_reprojection_error_px: float
+
+
+def session_value(info: Mapping[str, Any], *keys: str) -> Any:
+    """A value at ``keys`` in session.yaml, else in its ``profile`` snapshot, else None."""
+    for root in (info, info.get("profile") or {}):
+        node: Any = root
+        for key in keys:
+            node = node.get(key) if isinstance(node, Mapping) else None
+        if node is not None:
+            return node
+    return None
+
+
+def session_intrinsics(info: Mapping[str, Any]) -> Intrinsics | None:
+    """``intrinsics`` or ``camera.intrinsics`` as ``{model, width, height, params}``."""
+    spec = session_value(info, "intrinsics") or session_value(info, "camera", "intrinsics")
+    if spec is None:
+        return None
+    try:
+        return Intrinsics(
+            str(spec["model"]), int(spec["width"]), int(spec["height"]),
+            tuple(float(p) for p in spec["params"]),
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise RigError(
+            f"session.yaml intrinsics are malformed ({exc})",
+            "give intrinsics: {model: PINHOLE, width: W, height: H, params: [fx, fy, cx, cy]}",
+        ) from exc
+
+
+def rescale(intr: Intrinsics, width: int, height: int) -> Intrinsics:
+    """The same camera at another image size (pixel edges scale, so do principal points)."""
+    if (width, height) == (intr.width, intr.height):
+        return intr
+    sx, sy = width / intr.width, height / intr.height
+    scaled = []
+    for name, value in zip(CAMERA_MODELS[intr.model], intr.params, strict=True):
+        if name in ("f", "fx", "cx"):
+            value *= sx if name != "f" else (sx + sy) / 2
+        elif name in ("fy", "cy"):
+            value *= sy
+        scaled.append(float(value))
+    return Intrinsics(intr.model, width, height, tuple(scaled))
+
+
+def run_sfm(
+    image_dir: Path,
+    names: Sequence[str],
+    conf: PosesConfig,
+    work_dir: Path,
+    intrinsics: Intrinsics | None = None,
+) -> SfmResult:
+    """SIFT + matching + incremental mapping with pycolmap on CPU; the largest model wins.
+
+    ``intrinsics`` (at the images' size) are used as a fixed shared camera when given.
+    """
+    with quiet_colmap():
+        return _sfm(image_dir, names, conf, work_dir, intrinsics)
+
+
+def _sfm(
+    image_dir: Path,
+    names: Sequence[str],
+    conf: PosesConfig,
+    work_dir: Path,
+    intrinsics: Intrinsics | None,
+) -> SfmResult:
+    database = work_dir / "database.db"
+    database.unlink(missing_ok=True)
+    reader = pycolmap.ImageReaderOptions()
+    if intrinsics is not None:
+        reader.camera_model = intrinsics.model
+        reader.camera_params = ",".join(repr(float(p)) for p in intrinsics.params)
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.num_threads = conf.num_threads
+    extraction.sift.max_num_features = conf.max_features
+    extraction.sift.estimate_affine_shape = conf.affine_sift
+    extraction.sift.domain_size_pooling = conf.affine_sift
+    pycolmap.extract_features(
+        database, image_dir, image_names=list(names), camera_mode=pycolmap.CameraMode.SINGLE,
+        reader_options=reader, extraction_options=extraction, device=pycolmap.Device.cpu,
+    )
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = conf.num_threads
+    matching.guided_matching = conf.guided_matching
+    matcher = conf.matcher if conf.matcher != "auto" else (
+        "exhaustive" if len(names) <= 60 else "sequential"
+    )
+    if matcher == "exhaustive":
+        pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
+    else:
+        pycolmap.match_sequential(database, matching_options=matching, device=pycolmap.Device.cpu)
+    options = pycolmap.IncrementalPipelineOptions()
+    options.num_threads = conf.num_threads
+    options.min_model_size = MIN_VIEWS
+    options.mapper.init_min_num_inliers = conf.init_min_inliers
+    options.mapper.abs_pose_min_num_inliers = max(15, conf.init_min_inliers // 2)
+    if intrinsics is not None and not conf.refine_intrinsics:
+        options.ba_refine_focal_length = False
+        options.ba_refine_principal_point = False
+        options.ba_refine_extra_params = False
+    models = pycolmap.incremental_mapping(database, image_dir, work_dir / "sparse", options)
+    if not models:
+        raise RigError(
+            f"structure from motion registered no views of {image_dir}",
+            "the views must overlap and show texture; capture more views or give known poses "
+            "in SESSION/poses/",
+        )
+    rec = max(models.values(), key=lambda r: r.num_reg_images())
+    cameras: dict[str, tuple[Intrinsics, Pose]] = {}
+    for image in rec.images.values():
+        if not image.has_pose:
+            continue
+        cam = image.camera
+        rigid = image.cam_from_world()
+        intr = Intrinsics(
+            cam.model.name, int(cam.width), int(cam.height), tuple(float(p) for p in cam.params)
+        )
+        cameras[image.name] = (
+            intr, Pose(np.asarray(rigid.rotation.matrix()), np.asarray(rigid.translation))
+        )
+    points = np.array([p.xyz for p in rec.points3D.values()], dtype=float).reshape(-1, 3)
+    return SfmResult(cameras, points, float(rec.compute_mean_reprojection_error()))
+
+
+def view_of_name(name: str, session: Session) -> int | None:
+    """Which view a known-pose image name refers to (see the module docstring)."""
+    for record in session.frames:
+        p = Path(record.path)
+        if name in (record.path, p.name, p.stem):
+            return record.view
+    match = re.fullmatch(r"(?:view_)?(\d+)(?:\.\w+)?", Path(name).name)
+    if match and int(match.group(1)) in set(session.views()):
+        return int(match.group(1))
+    return None
+
+
+def metric_scale(info: Mapping[str, Any], centres: Mapping[int, np.ndarray]) -> float | None:
+    """Median of measured / reconstructed camera-centre distances, None without any."""
+    entries = session_value(info, "known_distances")
+    if not entries:
+        return None
+    ratios = []
+    for entry in entries:
+        try:
+            a, b = (int(v) for v in entry["views"])
+            metres = float(entry["metres"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise RigError(
+                f"session.yaml known_distances entry {entry!r} is malformed",
+                "write each as {views: [a, b], metres: d}",
+            ) from exc
+        if a in centres and b in centres:
+            ratios.append(metres / float(np.linalg.norm(centres[a] - centres[b])))
+        else:
+            log.warning("known distance between views %d and %d: a view is not registered", a, b)
+    return float(np.median(ratios)) if ratios else None
+
+
+def _known(
+    session: Session, decoded: DecodeIndex
+) -> tuple[dict[int, tuple[Intrinsics, Pose]], PoseSummary]:
+    cams, images = read_colmap_text(session.poses_dir)
+    out: dict[int, tuple[Intrinsics, Pose]] = {}
+    for cid, name, pose in images.values():
+        view = view_of_name(name, session)
+        if view is None:
+            log.warning("known pose %s matches no view of the session, ignored", name)
+            continue
+        if cid not in cams:
+            raise RigError(
+                f"{session.poses_dir / 'images.txt'}: image {name} uses camera {cid}, "
+                "which cameras.txt lacks", "add the camera or fix the id",
+            )
+        out[view] = (cams[cid], pose)
+    views = sorted(decoded.sfm_images)
+    summary = PoseSummary(
+        "known", len(set(out) & set(views)), len(views), sorted(set(out) & set(views)),
+        sorted(set(views) - set(out)), None, "metric", 1.0, "known poses",
+    )
+    return out, summary
+
+
+def _sfm_poses(
+    session: Session, decoded: DecodeIndex, decoded_dir: Path, conf: PosesConfig, out_dir: Path
+) -> tuple[dict[int, tuple[Intrinsics, Pose]], PoseSummary, np.ndarray]:
+    views = sorted(decoded.sfm_images)
+    first = next(f for f in decoded.frames if f.view == views[0])
+    full = (first.width, first.height)
+    names = [decoded.sfm_images[v] for v in views]
+    sfm_image = cv2.imread(str(decoded_dir / SFM_DIR / names[0]), cv2.IMREAD_UNCHANGED)
+    if sfm_image is None:
+        raise RigError(f"{decoded_dir / SFM_DIR / names[0]} cannot be read", "delete recon/decoded")
+    h, w = sfm_image.shape[:2]
+    given = session_intrinsics(session.info)
+    with tempfile.TemporaryDirectory(dir=out_dir) as tmp:
+        result = run_sfm(
+            decoded_dir / SFM_DIR, names, conf, Path(tmp),
+            rescale(given, w, h) if given is not None else None,
+        )
+    by_name = {decoded.sfm_images[v]: v for v in views}
+    out = {
+        by_name[n]: (rescale(intr, *full), pose) for n, (intr, pose) in result.cameras.items()
+    }
+    scale = metric_scale(session.info, {v: p.center for v, (_, p) in out.items()})
+    points = result.points
+    if scale is not None:
+        out = {v: (i, Pose(p.R, p.t * scale)) for v, (i, p) in out.items()}
+        points = points * scale
+    summary = PoseSummary(
+        "sfm", len(out), len(views), sorted(out), sorted(set(views) - set(out)),
+        result.mean_reprojection_error_px, "metric" if scale else "relative", scale or 1.0,
+        "session" if given is not None else "sfm",
+    )
+    return out, summary, points
+
+
+def _poses(session: Session, decoded_dir: Path, conf: PosesConfig, out_dir: Path) -> None:
+    decoded = DecodeIndex.load(decoded_dir)
+    known = conf.use_known and (session.poses_dir / "images.txt").is_file()
+    if known:
+        cameras, summary = _known(session, decoded)
+        points = np.zeros((0, 3))
+    else:
+        cameras, summary, points = _sfm_poses(session, decoded, decoded_dir, conf, out_dir)
+    if summary.registered < MIN_VIEWS:
+        raise RigError(
+            f"only {summary.registered} of {summary.total} views of {session.root} have a pose "
+            f"({'known' if known else 'SfM'}); at least {MIN_VIEWS} are needed",
+            "capture more overlapping, textured views, or give poses in SESSION/poses/ "
+            "(COLMAP text model)",
+        )
+    registered = {v: cameras[v] for v in summary.registered_views}
+    distinct: list[Intrinsics] = []
+    images = {}
+    for view, (intr, pose) in registered.items():
+        if intr not in distinct:
+            distinct.append(intr)
+        images[view + 1] = (distinct.index(intr) + 1, f"view_{view:04d}.png", pose)
+    write_colmap_text(out_dir, {i + 1: c for i, c in enumerate(distinct)}, images)
+    np.save(out_dir / POINTS, points)
+    write_bytes_atomically(out_dir / SUMMARY, json.dumps(asdict(summary), indent=1).encode())
+    log.info(
+        "poses (%s): %d/%d views registered, mean reprojection error %s px, scale %s",
+        summary.source, summary.registered, summary.total,
+        "n/a" if summary.mean_reprojection_error_px is None
+        else f"{summary.mean_reprojection_error_px:.3f}", summary.scale,
+    )
+
+
+def load(out_dir: Path) -> tuple[dict[int, Intrinsics], dict[int, Pose], PoseSummary]:
+    """Per-view intrinsics and poses of the stage's output, and its summary."""
+    cams, images = read_colmap_text(out_dir)
+    intr = {iid - 1: cams[cid] for iid, (cid, _, _) in images.items()}
+    poses = {iid - 1: pose for iid, (_, _, pose) in images.items()}
+    summary = PoseSummary(**json.loads((out_dir / SUMMARY).read_text()))
+    return intr, poses, summary
+
+
+def run(
+    conf: PosesConfig | Mapping[str, Any], session_dir: Path, decoded_dir: Path, out_dir: Path
+) -> Path:
+    """Poses of every view (known or SfM) into ``out_dir`` (resumable)."""
+    conf = conf if isinstance(conf, PosesConfig) else PosesConfig(**conf)
+    session = Session.open(session_dir)
+    inputs = [session_dir / "session.yaml", decoded_dir / INDEX, session.poses_dir]
+    if out_dir.exists() and not (out_dir / ".stamp.json").exists():
+        shutil.rmtree(out_dir)
+    run_stage(
+        "poses", asdict(conf), inputs, out_dir, lambda: _poses(session, decoded_dir, conf, out_dir)
+    )
+    return out_dir
