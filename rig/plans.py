@@ -30,6 +30,7 @@ class FrameSpec:
     view: int
     label: str  # illumination name, "ambient", or a structured-light pattern id
     kind: str  # one of KINDS
+    placement: int | None = None  # projector placement lighting the view (None: on the plate)
 
 
 @dataclass(frozen=True)
@@ -38,6 +39,14 @@ class MoveTo:
 
     view: int
     n_views: int
+
+
+@dataclass(frozen=True)
+class MoveProjector:
+    """Ask the person to move the projector (only the projector) to another placement."""
+
+    placement: int
+    n_placements: int
 
 
 @dataclass(frozen=True)
@@ -59,7 +68,7 @@ class Trigger:
     spec: FrameSpec
 
 
-Msg = MoveTo | SetLight | ShowPattern | Trigger
+Msg = MoveProjector | MoveTo | SetLight | ShowPattern | Trigger
 
 
 def gray_code_patterns(width: int, height: int) -> list[str]:
@@ -84,7 +93,8 @@ def pattern_image(pattern: str, width: int, height: int) -> np.ndarray:
 
 def frame_list(plan: Plan, projector_size: tuple[int, int] | None = None) -> list[FrameSpec]:
     """Every frame of the session in capture order: per view the optional ambient frame,
-    then each illumination, then the structured-light patterns."""
+    then each illumination, then the structured-light patterns; each tagged with the
+    projector placement of its view when the plan moves the projector on its own."""
     patterns: list[str] = []
     if plan.structured_light is not None and plan.structured_light.gray_code:
         if projector_size is None:
@@ -95,21 +105,29 @@ def frame_list(plan: Plan, projector_size: tuple[int, int] | None = None) -> lis
         per_view = [(AMBIENT, "ambient")] if plan.ambient else []
         per_view += [(name, "illumination") for name in plan.illuminations]
         per_view += [(pattern, "pattern") for pattern in patterns]
+        placement = None if plan.projector is None else plan.projector.of_view(view)
         frames += [
-            FrameSpec(len(frames) + k, view, label, kind)
+            FrameSpec(len(frames) + k, view, label, kind, placement)
             for k, (label, kind) in enumerate(per_view)
         ]
     return frames
 
 
-def capture_plan(frames: list[FrameSpec], done: Collection[int], n_views: int) -> Iterator[Msg]:
+def capture_plan(
+    frames: list[FrameSpec], done: Collection[int], n_views: int, n_placements: int = 0
+) -> Iterator[Msg]:
     """Messages for the frames not in ``done``: views with nothing left are skipped without a
-    prompt, and the light is switched only when it changes."""
+    prompt, the projector is moved only when the placement changes (then the camera), and
+    the light is switched only when it changes."""
     current_view: int | None = None
+    placement: int | None = None
     light: str | None | bool = False  # False: unknown state
     for spec in frames:
         if spec.frame in done:
             continue
+        if spec.placement is not None and spec.placement != placement:
+            placement = spec.placement
+            yield MoveProjector(placement, n_placements)
         if spec.view != current_view:
             current_view = spec.view
             yield MoveTo(spec.view, n_views)

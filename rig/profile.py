@@ -21,6 +21,7 @@ from typing import Any
 import yaml
 
 from calibration.errors import RigError
+from reconstruct.board import BoardSpec
 
 DEVICE_KINDS = ("light", "camera", "projector", "spectrometer")
 # Drivers the capture routes itself; the rest go to ``drivers.registry``.
@@ -45,6 +46,7 @@ TOP_KEYS = (
     "known_distances",
     "poses",
     "sim",
+    "board",
 )
 PLAN_KEYS = (
     "views",
@@ -53,7 +55,9 @@ PLAN_KEYS = (
     "structured_light",
     "settle_s",
     "trajectory",
+    "projector",
 )
+PROJECTOR_PLAN_KEYS = ("placements", "views_per_placement")
 TRAJECTORY_KEYS = ("elevations_deg", "azimuth_start_deg")
 STRUCTURED_KEYS = ("gray_code",)
 CALIBRATION_KEYS = ("store", "camera", "lights")
@@ -68,6 +72,19 @@ class StructuredLight:
     columns and rows, each with its inverse, plus all-white and all-black references."""
 
     gray_code: bool
+
+
+@dataclass(frozen=True)
+class ProjectorPlacements:
+    """The projector stands on its own at ``count`` placements; at each the camera takes
+    ``views_per_placement`` views (camera and projector moved alternately), so views lit
+    from one placement can be matched through the projector's code."""
+
+    count: int
+    views_per_placement: int
+
+    def of_view(self, view: int) -> int:
+        return view // self.views_per_placement
 
 
 @dataclass(frozen=True)
@@ -96,6 +113,7 @@ class Plan:
     structured_light: StructuredLight | None = None
     settle_s: float = 0.0
     trajectory: Trajectory = field(default_factory=Trajectory)
+    projector: ProjectorPlacements | None = None  # None: the projector rides on the plate
 
 
 @dataclass(frozen=True)
@@ -144,6 +162,7 @@ class Profile:
     camera_pairs: tuple[CameraPair, ...]  # measured distances between camera centres
     poses: str
     sim: Mapping[str, Any]
+    board: BoardSpec | None = None  # the printed marker board under the object
 
     def device(self, kind: str) -> Mapping[str, Any] | None:
         return self.devices.get(kind)
@@ -281,6 +300,9 @@ class _Validator:
                 "is 'known' but no device is simulated",
                 "'estimate' for a real rig (known poses come only from the sim)",
             )
+        board = None
+        if top.get("board") is not None:
+            board = BoardSpec.from_dict(self.mapping(top["board"], "board", None), self.source)
         name = top.get("name", Path(self.source).stem)
         return Profile(
             name=self.string(name, "name"),
@@ -296,6 +318,7 @@ class _Validator:
             camera_pairs=pairs,
             poses=poses,
             sim=sim,
+            board=board,
         )
 
     def devices(self, value: Any) -> dict[str, dict[str, Any]]:
@@ -414,7 +437,29 @@ class _Validator:
                 tuple(self.number(e, "plan.trajectory.elevations_deg") for e in elevations),
                 self.number(tr.get("azimuth_start_deg", 0.0), "plan.trajectory.azimuth_start_deg"),
             )
-        return Plan(views, tuple(chosen), ambient, structured, settle, trajectory)
+        placements = None
+        if section.get("projector") is not None:
+            placements = self.projector_placements(section["projector"], views, devices)
+        return Plan(views, tuple(chosen), ambient, structured, settle, trajectory, placements)
+
+    def projector_placements(
+        self, value: Any, views: int, devices: Mapping[str, Any]
+    ) -> ProjectorPlacements:
+        key = "plan.projector"
+        if "projector" not in devices:
+            raise self.fail(key, "needs a projector", "a devices.projector section")
+        section = self.mapping(value, key, PROJECTOR_PLAN_KEYS)
+        count = section.get("placements")
+        if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+            raise self.fail(f"{key}.placements", f"is {_show(count)}", "a positive whole number")
+        per = section.get("views_per_placement", views // count)
+        if isinstance(per, bool) or not isinstance(per, int) or per < 1 or per * count != views:
+            raise self.fail(
+                f"{key}.views_per_placement",
+                f"is {_show(per)}: {count} placements x {per} views is not plan.views = {views}",
+                "a whole number with placements x views_per_placement = plan.views",
+            )
+        return ProjectorPlacements(count, per)
 
     def camera_pairs(self, value: Any, n_views: int) -> tuple[CameraPair, ...]:
         key = "known_distances.camera_pairs"

@@ -123,8 +123,11 @@ class SimCamera:
         sensor: SensorConfig | None = None,
         seed: int = 0,
         caster: RayCaster | None = None,
+        ground: render.GroundPlane | None = None,
     ) -> None:
         self.scene = scene
+        self.ground = ground
+        self._reflectance = render.with_ground(scene.reflectance, ground)
         self.light = light
         self.projector = projector
         self.sensor = sensor or SensorConfig()
@@ -177,6 +180,7 @@ class SimCamera:
                 self.sensor.supersample,
                 "flat" if self.sensor.normals == "flat" else "smooth",
                 self._vertex_normals,
+                ground=self.ground,
             )
             self._hits = (key, hits)
             self._weights.clear()
@@ -210,13 +214,14 @@ class SimCamera:
         return render.shade_vertex_rgb(hits, terms)
 
     def _vertex_rgb(self, spd: np.ndarray) -> np.ndarray:
-        """Per-vertex ``(C^T L) r``, cached per SPD (a capture uses a few illuminations)."""
+        """Per-vertex ``(C^T L) r`` (plus the ground's paper and ink), cached per SPD (a
+        capture uses a few illuminations)."""
         key = _key(spd)
         if key not in self._rgb:
             if len(self._rgb) > 16:
                 self._rgb.clear()
             resp = forward.response_matrix(self.sensitivity, spd)
-            self._rgb[key] = render.vertex_rgb(self.scene.reflectance, resp)
+            self._rgb[key] = render.vertex_rgb(self._reflectance, resp)
         return self._rgb[key]
 
     def expose(self, linear: np.ndarray, stem: str) -> np.ndarray:

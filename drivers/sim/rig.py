@@ -2,18 +2,27 @@
 
 ``SimRig(config, seed)`` is deterministic for a seed: the same captures give the same bytes.
 The rig moves its camera itself (``goto_view``); the bulb rides on the camera plate at the
-trajectory's ``light_offset_m`` (or sits at a free position per view), the projector rides on
-the plate at ``projector.offset_m`` with the camera's orientation.
+trajectory's ``light_offset_m`` (or sits at a free position per view). The projector rides on
+the plate at ``projector.offset_m`` with the camera's orientation or, with
+``projector.placements: K``, stands on its own at K placements around the object while the
+camera takes ``views_per_placement`` views of the side it lights (camera and projector moved
+alternately, as in Pro-Cam SSfM).
 
 Config keys (all optional): ``scene`` (blob | torus | chart, or a folder written by
 ``Scene.save``), ``scene_seed``, ``subdivisions``, ``views``, ``light_offset_m``,
 ``trajectory`` (see :class:`TrajectoryConfig`), ``camera`` (see :class:`SensorConfig`),
-``projector`` (``width``, ``height``, ``focal_px``, ``offset_m``), ``illuminations``.
+``projector`` (``width``, ``height``, ``focal_px``, ``offset_m``, ``placements``,
+``views_per_placement``, ``placement_radius_m``, ``placement_elevation_deg``,
+``view_spread_deg``), ``illuminations``, ``ground`` (a textured plane at z = 0 the object
+stands on, e.g. a printed marker board: ``texture`` (H, W) array or ``.npy`` path in [0, 1],
+``extent`` [x0, y0, x1, y1] metres, ``paper`` and ``ink`` reflectances (a number or one value
+per wavelength); the scene is lifted to stand on it and the cameras aim at its middle).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -26,8 +35,15 @@ from drivers.sim.light import SimLight
 from drivers.sim.projector import SimProjector
 from drivers.sim.scene import SCENES, Scene, make_scene
 from drivers.sim.spectrometer import SimSpectrometer
-from drivers.sim.trajectory import TrajectoryConfig, light_positions, ring_poses
+from drivers.sim.trajectory import (
+    PlacementConfig,
+    TrajectoryConfig,
+    light_positions,
+    placement_poses,
+    ring_poses,
+)
 from reconstruct.camera import Intrinsics, Pose, write_colmap_text
+from reconstruct.render import GroundPlane
 
 _KEYS = {
     "scene",
@@ -39,13 +55,20 @@ _KEYS = {
     "camera",
     "projector",
     "illuminations",
+    "ground",
 }
 _PROJECTOR_DEFAULTS: dict[str, Any] = {
     "width": 800,
     "height": 600,
     "focal_px": 1000.0,
     "offset_m": [-0.08, 0.0, 0.0],
+    "placements": 0,  # 0: on the camera plate; K: K free placements
+    "views_per_placement": None,  # default: views / placements
+    "placement_radius_m": 0.45,
+    "placement_elevation_deg": 15.0,
+    "view_spread_deg": 35.0,
 }
+_GROUND_KEYS = ("texture", "extent", "paper", "ink")
 
 
 def sfm_image_name(view: int) -> str:
@@ -66,19 +89,17 @@ class SimRig:
             )
         self.seed = int(seed)
         self.scene = _load_scene(conf, self.seed)
+        self.ground = _ground(conf.get("ground"), len(self.scene.wavelengths))
         traj = dict(conf.get("trajectory") or {})
+        if self.ground is not None:
+            self.scene = stand_on_ground(self.scene)
+            lo, hi = self.scene.vertices.min(axis=0), self.scene.vertices.max(axis=0)
+            traj.setdefault("target_m", [float(x) for x in (lo + hi) / 2])
         if "views" in conf:
             traj["views"] = int(conf["views"])
         if "light_offset_m" in conf:
             traj["light_offset_m"] = conf["light_offset_m"]
         self.trajectory = TrajectoryConfig.from_mapping(traj)
-        self.poses: list[Pose] = ring_poses(self.trajectory)
-        self.light_positions = light_positions(self.trajectory, self.poses, self.seed)
-        self.light_offset: np.ndarray | None = (
-            np.asarray(self.trajectory.light_offset_m) if self.trajectory.light == "rigid" else None
-        )
-        self.sensor = SensorConfig.from_mapping(conf.get("camera"))
-        self.intrinsics: Intrinsics = self.sensor.intrinsics
         proj = {**_PROJECTOR_DEFAULTS, **dict(conf.get("projector") or {})}
         extra = sorted(set(proj) - set(_PROJECTOR_DEFAULTS))
         if extra:
@@ -86,12 +107,28 @@ class SimRig:
                 f"sim.projector: unknown key(s) {', '.join(extra)}",
                 f"use only {', '.join(_PROJECTOR_DEFAULTS)}",
             )
+        self.placements = PlacementConfig.from_mapping(proj, self.trajectory.views)
+        if self.placements is None:
+            self.poses: list[Pose] = ring_poses(self.trajectory)
+            self.projector_poses: list[Pose] = []
+        else:
+            self.poses, self.projector_poses = placement_poses(self.trajectory, self.placements)
+        self.light_positions = light_positions(self.trajectory, self.poses, self.seed)
+        if self.ground is not None:  # a light under the table would light nothing
+            self.light_positions[:, 2] = np.maximum(self.light_positions[:, 2], 0.02)
+        self.light_offset: np.ndarray | None = (
+            np.asarray(self.trajectory.light_offset_m) if self.trajectory.light == "rigid" else None
+        )
+        self.sensor = SensorConfig.from_mapping(conf.get("camera"))
+        self.intrinsics: Intrinsics = self.sensor.intrinsics
         self.projector_offset = np.asarray(proj["offset_m"], dtype=float)
         self.light = SimLight(illuminations=conf.get("illuminations"))
         self.projector = SimProjector(
             Intrinsics.pinhole(int(proj["width"]), int(proj["height"]), float(proj["focal_px"]))
         )
-        self.camera = SimCamera(self.scene, self.light, self.projector, self.sensor, self.seed)
+        self.camera = SimCamera(
+            self.scene, self.light, self.projector, self.sensor, self.seed, ground=self.ground
+        )
         self.spectrometer = SimSpectrometer(
             lambda: self.light.spd() + self.projector.spd(), seed=self.seed
         )
@@ -109,7 +146,18 @@ class SimRig:
         pose = self.poses[view]
         self.camera.set_pose(pose)
         self.light.position = self.light_positions[view]
-        self.projector.pose = Pose(pose.R, pose.t - self.projector_offset)
+        placement = self.projector_placement(view)
+        self.projector.pose = (
+            Pose(pose.R, pose.t - self.projector_offset)
+            if placement is None
+            else self.projector_poses[placement]
+        )
+
+    def projector_placement(self, view: int) -> int | None:
+        """The projector placement lighting ``view`` (None: the projector is on the plate)."""
+        if self.placements is None:
+            return None
+        return view // self.placements.views_per_placement
 
     def write_ground_truth(self, folder: Path) -> None:
         """Write the truth for evaluation: ``mesh.ply``, ``reflectance.npy``, ``patch.npy``,
@@ -127,7 +175,20 @@ class SimRig:
             if self.light_offset is None
             else [float(x) for x in self.light_offset],
             "light_positions_m": [[float(x) for x in p] for p in self.light_positions],
-            "projector_offset_m": [float(x) for x in self.projector_offset],
+            "projector_offset_m": None
+            if self.placements is not None
+            else [float(x) for x in self.projector_offset],
+            "projector_placements": [
+                {"R": p.R.tolist(), "t": p.t.tolist(), "centre_m": p.center.tolist()}
+                for p in self.projector_poses
+            ],
+            "view_placement": [self.projector_placement(v) for v in range(len(self.poses))],
+            "ground": None
+            if self.ground is None
+            else {
+                "extent_m": [float(x) for x in self.ground.extent],
+                "texture_shape": list(np.shape(self.ground.texture)),
+            },
             "projector_intrinsics": {
                 "model": self.projector.intrinsics.model,
                 "width": self.projector.width,
@@ -142,6 +203,7 @@ class SimRig:
                 "views": self.trajectory.views,
                 "elevations_deg": list(self.trajectory.elevations_deg),
                 "radius_m": self.trajectory.radius_m,
+                "target_m": list(self.trajectory.target_m),
             },
         }
         (folder / "rig.yaml").write_text(yaml.safe_dump(rig, sort_keys=False))
@@ -161,4 +223,48 @@ def _load_scene(conf: Mapping[str, Any], seed: int) -> Scene:
     raise RigError(
         f"sim.scene {name!r} is neither a built-in scene nor a folder",
         f"use one of {', '.join(SCENES)} or a folder with mesh.ply + reflectance.npy + scene.yaml",
+    )
+
+
+def stand_on_ground(scene: Scene) -> Scene:
+    """The scene moved up so its lowest point touches z = 0 (it stands on the ground)."""
+    lift = -float(scene.vertices[:, 2].min())
+    return replace(scene, vertices=scene.vertices + np.array([0.0, 0.0, lift]))
+
+
+def _spectrum(value: Any, n: int, key: str) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 0:
+        arr = np.full(n, float(arr))
+    if arr.shape != (n,) or not np.all((arr >= 0) & (arr <= 1)):
+        raise RigError(
+            f"sim.ground.{key} has shape {arr.shape} or values outside [0, 1]",
+            f"give one reflectance in [0, 1] or {n} of them (one per wavelength)",
+        )
+    return arr
+
+
+def _ground(value: Any, n_wavelengths: int) -> GroundPlane | None:
+    """``sim.ground`` -> a :class:`GroundPlane` (None when absent)."""
+    if value is None:
+        return None
+    if not isinstance(value, Mapping) or set(value) - set(_GROUND_KEYS) or "texture" not in value:
+        raise RigError(
+            f"sim.ground must be a mapping with keys {', '.join(_GROUND_KEYS)}",
+            "give texture (array or .npy file), extent [x0, y0, x1, y1] (m), paper, ink",
+        )
+    texture = value["texture"]
+    if isinstance(texture, (str, Path)):
+        path = Path(texture)
+        if not path.is_file():
+            raise RigError(f"sim.ground.texture file {path} does not exist", "give a .npy file")
+        texture = np.load(path, allow_pickle=False)
+    extent = value.get("extent")
+    if extent is None or len(extent) != 4:
+        raise RigError("sim.ground.extent is missing or not 4 numbers", "give [x0, y0, x1, y1]")
+    return GroundPlane(
+        np.clip(np.asarray(texture, dtype=np.float32), 0.0, 1.0),
+        (float(extent[0]), float(extent[1]), float(extent[2]), float(extent[3])),
+        _spectrum(value.get("paper", 0.85), n_wavelengths, "paper"),
+        _spectrum(value.get("ink", 0.04), n_wavelengths, "ink"),
     )

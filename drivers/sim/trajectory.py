@@ -79,6 +79,72 @@ def ring_poses(conf: TrajectoryConfig) -> list[Pose]:
     return poses
 
 
+@dataclass(frozen=True)
+class PlacementConfig:
+    """Free projector placements (the ``sim.projector`` keys besides the optics): ``count``
+    placements evenly spread in azimuth, ``views_per_placement`` camera views each."""
+
+    count: int
+    views_per_placement: int
+    radius_m: float
+    elevation_deg: float
+    view_spread_deg: float
+
+    @classmethod
+    def from_mapping(cls, data: Mapping[str, Any], views: int) -> PlacementConfig | None:
+        """None when ``placements`` is 0 (the projector rides on the camera plate)."""
+        count = int(data.get("placements") or 0)
+        if count == 0:
+            return None
+        per = data.get("views_per_placement")
+        per = views // count if per is None else int(per)
+        if count < 0 or per < 1 or count * per != views:
+            raise RigError(
+                f"sim.projector: {count} placements x {per} views per placement does not "
+                f"give the {views} views of the trajectory",
+                "make views = placements x views_per_placement",
+            )
+        conf = cls(
+            count,
+            per,
+            float(data.get("placement_radius_m", 0.45)),
+            float(data.get("placement_elevation_deg", 15.0)),
+            float(data.get("view_spread_deg", 35.0)),
+        )
+        if conf.radius_m <= 0:
+            raise RigError("sim.projector.placement_radius_m must be positive")
+        return conf
+
+
+def _eye(target: np.ndarray, radius: float, azimuth_deg: float, elevation_deg: float) -> np.ndarray:
+    a, e = np.deg2rad(azimuth_deg), np.deg2rad(elevation_deg)
+    return target + radius * np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+
+
+def placement_poses(
+    conf: TrajectoryConfig, placements: PlacementConfig
+) -> tuple[list[Pose], list[Pose]]:
+    """Camera poses (views of placement k are ``k·M .. k·M + M − 1``) and projector poses.
+
+    Projector k stands at azimuth ``start + 360°·k/K``; its views spread over
+    ± ``view_spread_deg`` around it (the side it lights, seen with a baseline to triangulate),
+    their elevations cycling through the trajectory's rings; all look at the target.
+    """
+    target = np.asarray(conf.target_m, dtype=float)
+    m = placements.views_per_placement
+    spread = placements.view_spread_deg * (np.linspace(-1.0, 1.0, m) if m > 1 else np.ones(1))
+    cameras: list[Pose] = []
+    projectors: list[Pose] = []
+    for k in range(placements.count):
+        az = conf.start_azimuth_deg + 360.0 * k / placements.count
+        eye = _eye(target, placements.radius_m, az, placements.elevation_deg)
+        projectors.append(Pose.look_at(eye, target))
+        for j in range(m):
+            elev = conf.elevations_deg[j % len(conf.elevations_deg)]
+            cameras.append(Pose.look_at(_eye(target, conf.radius_m, az + spread[j], elev), target))
+    return cameras, projectors
+
+
 def light_positions(conf: TrajectoryConfig, poses: Sequence[Pose], seed: int) -> np.ndarray:
     """World light position per view, (N, 3)."""
     if conf.light == "rigid":

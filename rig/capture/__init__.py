@@ -94,6 +94,7 @@ def run_capture(
             total=len(frames),
             exposure_checks=dict(info.get("exposure_checks") or {}),
             views_done=sorted({r.view for r in records}),
+            board_checks={int(k): v for k, v in (info.get("board_checks") or {}).items()},
         )
         run: dict[str, Any] = {
             "started": now(),
@@ -125,6 +126,8 @@ def run_capture(
             run["ended"] = now()
             run["frames"] = state.captured
             info["exposure_checks"] = state.exposure_checks
+            if state.board_checks:
+                info["board_checks"] = state.board_checks
             info["frames_done"] = len(state.done)
             write_info(out, info)
     finally:
@@ -191,6 +194,12 @@ def _new_info(
             "structured_light": bool(plan.structured_light),
             "frames": n_frames,
             "projector_size": list(projector_size) if projector_size else None,
+            "projector_placements": None
+            if plan.projector is None
+            else {
+                "placements": plan.projector.count,
+                "views_per_placement": plan.projector.views_per_placement,
+            },
         },
         "light_mount": {
             "type": profile.light_mount.type,
@@ -206,6 +215,8 @@ def _new_info(
         "devices": devices.describe(),
         "notes": "",
     }
+    if profile.board is not None:  # the poses stage reads the board from here
+        info["board"] = profile.board.to_dict()
     if devices.sim is not None:
         devices.sim.write_ground_truth(out / GROUND_TRUTH_DIR)
         info["ground_truth"] = GROUND_TRUTH_DIR

@@ -11,8 +11,11 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from calibration.errors import RigError
 from drivers.protocols import Camera, LightSource, Projector, Spectrometer
+from reconstruct.board import BoardSpec, board_texture
 from rig.profile import Profile
 
 Ask = Callable[[str], str]
@@ -83,7 +86,8 @@ def open_sim(config: Mapping[str, Any], seed: int) -> Any:
 def sim_config(profile: Profile) -> dict[str, Any]:
     """The profile's ``sim`` section completed from the rest of the profile, so the virtual
     rig matches the plan: as many views, the plate offset (or a free light), the elevations,
-    the illuminations and the camera settings."""
+    the illuminations, the camera settings, the projector placements and the board (the
+    ground plane the object stands on)."""
     config = copy.deepcopy(dict(profile.sim))
     config["views"] = profile.plan.views
     trajectory = dict(config.get("trajectory") or {})
@@ -99,7 +103,32 @@ def sim_config(profile: Profile) -> dict[str, Any]:
         if key in profile.camera_settings:
             camera.setdefault(key, profile.camera_settings[key])
     config["camera"] = camera
+    placements = profile.plan.projector
+    if placements is not None:
+        projector = dict(config.get("projector") or {})
+        projector["placements"] = placements.count
+        projector["views_per_placement"] = placements.views_per_placement
+        config["projector"] = projector
+    if profile.board is not None and "ground" not in config:
+        config["ground"] = board_ground(profile.board)
     return config
+
+
+BOARD_PX_PER_M = 6000.0  # texture resolution: 0.17 mm texels, finer than a sub-pixel
+PAPER_REFLECTANCE = 0.85
+INK_REFLECTANCE = 0.04
+
+
+def board_ground(board: BoardSpec) -> dict[str, Any]:
+    """The sim's ground plane for a printed board: its paper/ink texture in the board's
+    world frame (z = 0, origin at the board centre), white paper and near-black ink."""
+    texture, extent = board_texture(board, BOARD_PX_PER_M)
+    return {
+        "texture": texture.astype(np.float32),
+        "extent": list(extent),
+        "paper": PAPER_REFLECTANCE,
+        "ink": INK_REFLECTANCE,
+    }
 
 
 def open_devices(

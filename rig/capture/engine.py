@@ -26,11 +26,20 @@ from rich.progress import (
 
 from calibration.errors import RigError
 from drivers.protocols import LightSource
+from reconstruct.board import board_visibility_report
 from reconstruct.session import RAW_DIR, FrameRecord
 from rig.capture.devices import Ask, RigDevices, device_errors
-from rig.capture.frames import INCOMING, ExposureCheck, check_exposure, read_raw, store_frame
+from rig.capture.frames import (
+    INCOMING,
+    ExposureCheck,
+    board_image,
+    check_exposure,
+    read_raw,
+    store_frame,
+)
 from rig.plans import (
     FrameSpec,
+    MoveProjector,
     MoveTo,
     Msg,
     SetLight,
@@ -42,6 +51,8 @@ from rig.plans import (
 from rig.profile import Profile
 
 AZIMUTH_BINS = 12
+BOARD_MIN_CORNERS = 6  # fewer and the view gets no board pose
+BOARD_MIN_CONTRAST = 0.2  # paper - ink, fraction of 8-bit full scale
 CAPTURE_ATTEMPTS = 3
 BLOCKS = " ▁▂▃▄▅▆▇█"
 
@@ -59,6 +70,7 @@ class RunState:
     captured: int = 0
     exposure_checks: dict[str, dict[str, Any]] = field(default_factory=dict)
     views_done: list[int] = field(default_factory=list)
+    board_checks: dict[int, dict[str, Any]] = field(default_factory=dict)
 
 
 class StopRequest:
@@ -165,7 +177,13 @@ class RunEngine:
         )
         self.progress = progress
         task = progress.add_task("capture", total=self.state.total, completed=len(self.state.done))
-        messages = capture_plan(self.frames, self.state.done, self.profile.plan.views)
+        placements = self.profile.plan.projector
+        messages = capture_plan(
+            self.frames,
+            self.state.done,
+            self.profile.plan.views,
+            placements.count if placements else 0,
+        )
         with self.stop.installed(), progress:
             try:
                 self._interpret(messages, progress, task)
@@ -178,7 +196,9 @@ class RunEngine:
         for msg in messages:
             if self.stop.requested:
                 raise self._stopped()
-            if isinstance(msg, MoveTo):
+            if isinstance(msg, MoveProjector):
+                self._move_projector(msg)
+            elif isinstance(msg, MoveTo):
                 self._move_to(msg)
             elif isinstance(msg, SetLight):
                 self._set_light(msg.illumination)
@@ -221,6 +241,19 @@ class RunEngine:
             if self.progress is not None:
                 self.progress.start()
 
+    def _move_projector(self, msg: MoveProjector) -> None:
+        """Camera and projector are moved alternately: now the projector, the camera stays."""
+        text = (
+            f"move the projector to placement {msg.placement + 1}/{msg.n_placements} "
+            "(leave the camera where it is; aim the projector at the object from a new side)"
+        )
+        if self.ask is not None and self.devices.sim is None:
+            answer = self._prompt(text[0].upper() + text[1:] + ", then press Enter (q to stop) ")
+            if answer.strip().lower() in ("q", "quit", "stop"):
+                raise self._stopped()
+        else:
+            self.console.print(f"projector: {text}", highlight=False)
+
     def _move_to(self, msg: MoveTo) -> None:
         hint = coverage_hint(self.directions, self.state.views_done, msg.view)
         if self.ask is not None and self.devices.sim is None:
@@ -229,8 +262,13 @@ class RunEngine:
                 if self.profile.light_mount.type == "free"
                 else ""
             )
+            what = (
+                "Move the camera (not the projector)"
+                if self.profile.plan.projector is not None
+                else "Move the plate"
+            )
             answer = self._prompt(
-                f"Move the plate to view {msg.view + 1}/{msg.n_views}{light} "
+                f"{what} to view {msg.view + 1}/{msg.n_views}{light} "
                 f"({hint}) and press Enter (q + Enter to stop) "
             )
             if answer.strip().lower() in ("q", "quit", "stop"):
@@ -306,11 +344,58 @@ class RunEngine:
                 )
         self.state.done.add(spec.frame)
         self.state.captured += 1
+        board = None
+        lit = spec.kind == "illumination" or spec.label == "white"  # not ambient or stripes
+        if self.profile.board is not None and lit and spec.view not in self.state.board_checks:
+            board = self._check_board(record, spec)
         if spec.kind == "illumination" and spec.label not in self.state.exposure_checks:
             check = self._check_exposure(record, spec)
-            self.state.exposure_checks[spec.label] = check.as_dict()
+            entry = check.as_dict()
+            if self.profile.board is not None:
+                if board is None or board["frame"] != spec.frame:
+                    board = self._board_report(record)
+                entry["board_contrast"] = board["contrast"]
+                self._warn_board_contrast(spec.label, check, board)
+            self.state.exposure_checks[spec.label] = entry
         if self.on_frame is not None:
             self.on_frame(record)
+
+    def _warn_board_contrast(
+        self, label: str, check: ExposureCheck, board: Mapping[str, Any]
+    ) -> None:
+        """A board found but faint (dim, or paper and ink both clipped) gets an exposure hint."""
+        if board["corners"] < BOARD_MIN_CORNERS or board["contrast"] >= BOARD_MIN_CONTRAST:
+            return
+        fix = (
+            "shorten the exposure (the paper clips)"
+            if check.saturated_fraction > 0.001
+            else "lengthen the exposure or add light"
+        )
+        self.console.print(
+            f"[yellow]exposure:[/] {label}: the board's paper/ink contrast is only "
+            f"{board['contrast']:.2f} (want {BOARD_MIN_CONTRAST}) — {fix}",
+            highlight=False,
+        )
+
+    def _board_report(self, record: FrameRecord) -> dict[str, Any]:
+        """Corners found and paper/ink contrast of the board in a frame."""
+        assert self.profile.board is not None
+        image = board_image(self.session_dir / record.path)
+        corners, contrast = board_visibility_report(image, self.profile.board)
+        return {"frame": record.frame, "corners": corners, "contrast": round(contrast, 4)}
+
+    def _check_board(self, record: FrameRecord, spec: FrameSpec) -> dict[str, Any]:
+        """On a view's first lit frame: warn when the board is not visible enough for a pose."""
+        report = self._board_report(record)
+        self.state.board_checks[spec.view] = report
+        if report["corners"] < BOARD_MIN_CORNERS:
+            self.console.print(
+                f"[yellow]board:[/] view {spec.view + 1}: only {report['corners']} board corners "
+                f"found (need {BOARD_MIN_CORNERS}) — keep more of the board in the frame, "
+                "away from the object's shadow and glare",
+                highlight=False,
+            )
+        return report
 
     def _check_exposure(self, record: FrameRecord, spec: FrameSpec) -> ExposureCheck:
         check = check_exposure(

@@ -129,6 +129,38 @@ def check_exposure(raw: RawData, label: str, exposure_s: float) -> ExposureCheck
     return ExposureCheck(label, saturated, mean, p99, exposure_s, suggestion)
 
 
+def board_image(path: Path) -> np.ndarray:
+    """A quick 8-bit RGB look at a frame for the board check: RAW through LibRaw with
+    bilinear demosaicing (half size for large sensors, camera white balance, BT.709 gamma,
+    no auto-brightening, so the board's contrast tells about the exposure), linear
+    TIFF/NumPy frames through :func:`reconstruct.board.linear_to_u8`."""
+    from reconstruct.board import linear_to_u8
+
+    suffix = path.suffix.lower()
+    if suffix in TIFF_SUFFIXES + NPY_SUFFIXES:
+        data = read_raw(path)
+        span = max(data.white - data.black, 1e-12)
+        return linear_to_u8((data.values.astype(np.float64) - data.black) / span)
+    import rawpy
+
+    try:
+        with rawpy.imread(str(path)) as raw:
+            return np.asarray(
+                raw.postprocess(
+                    half_size=bool(raw.sizes.width > 2000),
+                    demosaic_algorithm=rawpy.DemosaicAlgorithm.LINEAR,
+                    use_camera_wb=True,
+                    no_auto_bright=True,
+                    output_bps=8,
+                )
+            )
+    except Exception as exc:
+        raise RigError(
+            f"frame file {path} does not decode for the board check ({exc})",
+            "check the camera's RAW format setting",
+        ) from exc
+
+
 def format_shutter(seconds: float) -> str:
     """Shutter speeds as cameras show them: ``1/60 s`` below half a second."""
     if seconds < 0.5:
@@ -166,6 +198,8 @@ def store_frame(session_dir: Path, spec: FrameSpec, captured: CapturedFrame) -> 
         "camera_serial": captured.camera_serial,
         **dict(captured.extra),
     }
+    if spec.placement is not None:  # reconstruct.procam groups views by it
+        extra["projector_placement"] = spec.placement
     if len(stored) > 1:
         extra["other_files"] = [{"path": p, "sha256": h} for p, h in stored[1:]]
     record = FrameRecord(

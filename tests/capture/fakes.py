@@ -33,7 +33,7 @@ def fake_profile(**plan: Any) -> Profile:
 
 
 class FakeLight:
-    channels = ("r", "g", "b", "w")
+    channels: tuple[str, ...] = ("r", "g", "b", "w")
     illuminations: Mapping[str, Mapping[str, float]] = {}
 
     def __init__(self) -> None:

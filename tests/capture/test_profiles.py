@@ -13,7 +13,14 @@ from calibration.errors import RigError
 from rig.cli import main
 from rig.profile import load_profile, shipped_profiles
 
-SHIPPED = ("sim", "bulb-gphoto2", "bulb-manual-handheld", "dmx-gphoto2", "projector-gphoto2")
+SHIPPED = (
+    "sim",
+    "sim-projector",
+    "bulb-gphoto2",
+    "bulb-manual-handheld",
+    "dmx-gphoto2",
+    "projector-gphoto2",
+)
 
 
 def sim_data() -> dict[str, Any]:
@@ -77,6 +84,11 @@ MALFORMED = [
     ("known_distances.camera_pairs", [{"views": [0, 99], "metres": 1.0}], "camera_pairs[0]"),
     ("known_distances.camera_pairs", [{"views": [0, 1], "metres": 0}], "metres"),
     ("plan", DELETE, "'plan'"),
+    ("board", "A3", "'board'"),
+    ("board.squares", [1, 7], "board squares 1x7"),
+    ("board.marker_length_m", 0.05, "board marker length"),
+    ("board.square_length_m", DELETE, "board.square_length_m"),
+    ("plan.projector", {"placements": 2}, "'plan.projector' needs a projector"),
 ]
 
 

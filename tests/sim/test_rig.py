@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from calibration.errors import RigError
 from calibration.spectra import resample
@@ -49,7 +50,7 @@ def test_views_look_at_the_object_and_light_rides_on_the_plate(rig: SimRig) -> N
     assert rig.camera.pose is rig.poses[4]
     np.testing.assert_allclose(rig.light.position, rig.light_positions[4])
     np.testing.assert_allclose(
-        rig.projector.pose.center, rig.poses[4].light_position([-0.08, 0, 0])
+        rig.projector.pose.center, rig.poses[4].light_position(np.array([-0.08, 0, 0]))
     )
     with pytest.raises(RigError, match="view 6"):
         rig.goto_view(6)
@@ -156,3 +157,29 @@ def test_same_seed_same_capture_bytes(rig: SimRig, tmp_path: Path) -> None:
     other.goto_view(2)
     other.light.set_illumination("LED1")
     assert other.camera.capture(tmp_path / "o", "v002_LED1").paths[0].read_bytes() != files[0]
+
+
+def test_free_projector_placements(tmp_path: Path) -> None:
+    """Camera and projector moved alternately: the projector holds its pose for the views of
+    a placement, faces the object from its own side, and the truth records it."""
+    projector = {"width": 64, "height": 48, "focal_px": 80.0, "placements": 3}
+    rig = SimRig({**SMALL, "subdivisions": 3, "projector": projector}, seed=0)
+    assert [rig.projector_placement(v) for v in range(6)] == [0, 0, 1, 1, 2, 2]
+    centres = []
+    for view in range(6):
+        rig.goto_view(view)
+        centres.append(rig.projector.pose.center.copy())
+        # the projector lights the object and is not where the camera is
+        target = np.asarray(rig.trajectory.target_m)
+        assert rig.projector.intrinsics.in_image(
+            project(rig.projector.intrinsics, rig.projector.pose, target[None])
+        )[0]
+        assert np.linalg.norm(centres[-1] - rig.poses[view].center) > 0.05
+    np.testing.assert_allclose(centres[0], centres[1])
+    assert np.linalg.norm(centres[0] - centres[2]) > 0.3
+    rig.write_ground_truth(tmp_path)
+    truth = yaml.safe_load((tmp_path / "rig.yaml").read_text())
+    assert truth["view_placement"] == [0, 0, 1, 1, 2, 2]
+    np.testing.assert_allclose(truth["projector_placements"][2]["centre_m"], centres[4])
+    with pytest.raises(RigError, match="views_per_placement"):
+        SimRig({**SMALL, "subdivisions": 3, "projector": {"placements": 4}})
