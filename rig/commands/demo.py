@@ -62,7 +62,10 @@ def handle(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
     profile_path = out / "demo-profile.yaml"
     profile_path.write_text(yaml.safe_dump(demo_profile(args.views), sort_keys=False))
-    config = {"subdivide": {}, "optimise": {"outer_iterations": 2}}
+    config = {
+        "subdivide": {"max_faces": 60000},
+        "optimise": {"outer_iterations": 2, "light_iterations": 10, "joint_iterations": 8},
+    }
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     with Progress(

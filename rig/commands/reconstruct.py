@@ -46,7 +46,8 @@ class ProgressPrinter:
         if not self.header:
             self.console.print(
                 "[bold]stage     it   rendering    spectral  photometric   geometric"
-                "        total      step  λ        CG  time[/]"
+                "        total      step  λ        CG  time[/]",
+                soft_wrap=True,
             )
             self.header = True
         t = rec.terms
@@ -57,6 +58,7 @@ class ProgressPrinter:
             f"{rec.step_norm:8.2e}  {rec.lam:7.1e}  {rec.cg_iterations:3d}  "
             f"{rec.seconds:5.2f}s{mark}",
             highlight=False,
+            soft_wrap=True,
         )
 
 

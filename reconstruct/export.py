@@ -1,0 +1,153 @@
+"""Files of ``SESSION/recon/`` that other tools read (names and layouts are fixed):
+
+* ``mesh.ply`` — binary little-endian PLY: ``x y z`` (float, metres), ``nx ny nz`` (float),
+  ``red green blue`` (uchar, sRGB of the reflectance under D65) and ``refl_400 … refl_700``
+  (float, the reflectance per grid wavelength), triangle faces as ``vertex_indices``;
+* ``reflectance.npz`` — ``vertices`` (N, 3), ``faces`` (F, 3), ``wavelengths_nm`` (N_λ,),
+  ``reflectance`` (N, N_λ), ``alpha`` (N, N_b), ``basis`` (N_λ, N_b), ``normals``, ``observed``;
+* ``report.json`` — see :func:`write_report`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibration.colorimetry import reflectance_to_srgb
+from calibration.errors import RigError
+from calibration.grid import SpectralGrid
+
+MESH_FILE = "mesh.ply"
+REFLECTANCE_FILE = "reflectance.npz"
+REPORT_FILE = "report.json"
+
+
+def _atomic(path: Path, data: bytes) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as handle:
+        handle.write(data)
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(tmp, path)
+
+
+def write_ply(
+    path: Path,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    normals: np.ndarray,
+    reflectance: np.ndarray,
+    wavelengths_nm: np.ndarray,
+) -> Path:
+    """Binary PLY with per-vertex sRGB (D65) and the spectral reflectance as float properties."""
+    n = len(vertices)
+    wl = [int(round(w)) for w in np.asarray(wavelengths_nm)]
+    if reflectance.shape != (n, len(wl)):
+        raise RigError(
+            f"reflectance has shape {reflectance.shape}, expected ({n}, {len(wl)})",
+            "give one spectrum per vertex on the grid",
+        )
+    srgb = reflectance_to_srgb(
+        reflectance, SpectralGrid.from_wavelengths(np.asarray(wavelengths_nm))
+    )
+    rgb8 = np.clip(np.round(srgb * 255.0), 0, 255).astype(np.uint8)
+    vtype = np.dtype(
+        [(k, "<f4") for k in ("x", "y", "z", "nx", "ny", "nz")]
+        + [(k, "u1") for k in ("red", "green", "blue")]
+        + [(f"refl_{w}", "<f4") for w in wl]
+    )
+    vert = np.empty(n, dtype=vtype)
+    for k, name in enumerate("xyz"):
+        vert[name] = vertices[:, k]
+        vert["n" + name] = normals[:, k]
+    for k, name in enumerate(("red", "green", "blue")):
+        vert[name] = rgb8[:, k]
+    for k, w in enumerate(wl):
+        vert[f"refl_{w}"] = reflectance[:, k]
+    ftype = np.dtype([("count", "u1"), ("i", "<i4", (3,))])
+    face = np.empty(len(faces), dtype=ftype)
+    face["count"] = 3
+    face["i"] = faces
+    header = [
+        "ply",
+        "format binary_little_endian 1.0",
+        "comment spectral-rig reconstruction",
+        f"element vertex {n}",
+    ]
+    header += [f"property float {k}" for k in ("x", "y", "z", "nx", "ny", "nz")]
+    header += [f"property uchar {k}" for k in ("red", "green", "blue")]
+    header += [f"property float refl_{w}" for w in wl]
+    header += [f"element face {len(faces)}", "property list uchar int vertex_indices", "end_header"]
+    data = ("\n".join(header) + "\n").encode("ascii") + vert.tobytes() + face.tobytes()
+    _atomic(path, data)
+    return path
+
+
+def write_reflectance_npz(
+    path: Path,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    normals: np.ndarray,
+    wavelengths_nm: np.ndarray,
+    reflectance: np.ndarray,
+    alpha: np.ndarray,
+    basis: np.ndarray,
+    observed: np.ndarray,
+) -> Path:
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez_compressed(
+        tmp,
+        vertices=vertices,
+        faces=faces,
+        normals=normals,
+        wavelengths_nm=wavelengths_nm,
+        reflectance=reflectance,
+        alpha=alpha,
+        basis=basis,
+        observed=observed,
+    )
+    os.replace(tmp, path)
+    return path
+
+
+def read_reflectance_npz(path: Path) -> dict[str, np.ndarray]:
+    """The arrays of a ``reflectance.npz`` (RigError naming the file and what is missing)."""
+    need = ("vertices", "faces", "wavelengths_nm", "reflectance")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            out = {k: np.asarray(data[k]) for k in data.files}
+    except (OSError, ValueError) as error:
+        raise RigError(
+            f"cannot read {path}: {error}", "run `rig reconstruct SESSION` first"
+        ) from error
+    missing = [k for k in need if k not in out]
+    if missing:
+        raise RigError(
+            f"{path} lacks {', '.join(missing)}", "it is not a spectral-rig reconstruction"
+        )
+    return out
+
+
+def write_report(path: Path, report: dict[str, Any]) -> Path:
+    """``report.json``: at least ``light`` (``offset_m``, ``positions_m``), ``history`` (each
+    cost term per iteration), ``timings_s``, ``settings`` and ``reflectance_scale_absolute``."""
+    _atomic(path, (json.dumps(_plain(report), indent=2) + "\n").encode())
+    return path
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value

@@ -1,0 +1,30 @@
+"""Joint optimisation of vertex positions, spectral reflectance and light positions
+(Spectral MVIR, paper eq. 1): cost and exact Jacobians, LM + PCG solver, the paper's steps."""
+
+from reconstruct.optimise.cost import JointCost, Linearisation
+from reconstruct.optimise.problem import Frames, Observations, Problem, Rig, Weights
+from reconstruct.optimise.solver import SolverSettings, levenberg_marquardt
+from reconstruct.optimise.steps import (
+    OptimiseInput,
+    OptimiseResult,
+    OptimiseSettings,
+    build_problem,
+    optimise,
+)
+
+__all__ = [
+    "Frames",
+    "JointCost",
+    "Linearisation",
+    "Observations",
+    "OptimiseInput",
+    "OptimiseResult",
+    "OptimiseSettings",
+    "Problem",
+    "Rig",
+    "SolverSettings",
+    "Weights",
+    "build_problem",
+    "levenberg_marquardt",
+    "optimise",
+]

@@ -1,0 +1,99 @@
+"""Observed colours at projected vertices: bilinear samples, their image gradients and the
+Jacobian of the projection — the disparity cue of the rendering term (paper Sec. 3.3.1).
+
+Pixel convention (DESIGN.md, COLMAP): the centre of array element ``[row, col]`` is at pixel
+coordinates ``(col + 0.5, row + 0.5)``. The bilinear interpolant is piecewise linear, so its
+gradient (used for ``∂y_obs/∂x``) is exact inside each pixel cell.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from reconstruct.camera import Intrinsics, Pose
+
+
+def bilinear(
+    images: np.ndarray, frame: np.ndarray, uv: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Sample ``images`` (F, H, W, C) of frame ``frame`` (M,) at pixel coords ``uv`` (M, 2).
+
+    Returns values (M, C) and the gradient ``∂value/∂(u, v)`` (M, C, 2). Coordinates are
+    clamped to the image so samples stay defined while a vertex moves near the border.
+    """
+    h, w = images.shape[1:3]
+    col = np.clip(uv[:, 0] - 0.5, 0.0, w - 1.000001)
+    row = np.clip(uv[:, 1] - 0.5, 0.0, h - 1.000001)
+    c0 = np.minimum(np.floor(col).astype(np.int64), w - 2)
+    r0 = np.minimum(np.floor(row).astype(np.int64), h - 2)
+    fc = (col - c0)[:, None]
+    fr = (row - r0)[:, None]
+    i00 = images[frame, r0, c0].astype(float)
+    i01 = images[frame, r0, c0 + 1].astype(float)
+    i10 = images[frame, r0 + 1, c0].astype(float)
+    i11 = images[frame, r0 + 1, c0 + 1].astype(float)
+    top = i00 + fc * (i01 - i00)
+    bottom = i10 + fc * (i11 - i10)
+    value = top + fr * (bottom - top)
+    du = (1.0 - fr) * (i01 - i00) + fr * (i11 - i10)
+    dv = bottom - top
+    return value, np.stack([du, dv], axis=-1)
+
+
+def taps_valid(
+    valid: np.ndarray, frame: np.ndarray, uv: np.ndarray, margin: float = 1.0
+) -> np.ndarray:
+    """True where ``uv`` lies ``margin`` px inside the image and all four bilinear taps are valid
+    (not saturated) in ``valid`` (F, H, W) bool."""
+    h, w = valid.shape[1:3]
+    with np.errstate(invalid="ignore"):
+        inside = (
+            (uv[:, 0] >= margin)
+            & (uv[:, 0] <= w - margin)
+            & (uv[:, 1] >= margin)
+            & (uv[:, 1] <= h - margin)
+        )
+    out = np.zeros(len(uv), dtype=bool)
+    idx = np.flatnonzero(inside)
+    col = uv[idx, 0] - 0.5
+    row = uv[idx, 1] - 0.5
+    c0 = np.clip(np.floor(col).astype(np.int64), 0, w - 2)
+    r0 = np.clip(np.floor(row).astype(np.int64), 0, h - 2)
+    f = frame[idx]
+    out[idx] = (
+        valid[f, r0, c0] & valid[f, r0, c0 + 1] & valid[f, r0 + 1, c0] & valid[f, r0 + 1, c0 + 1]
+    )
+    return out
+
+
+def project_with_jacobian(
+    intrinsics: Intrinsics, pose: Pose, points: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel coordinates (M, 2) of world points and ``∂uv/∂x`` (M, 2, 3).
+
+    The distortion's 2×2 Jacobian is taken by central differences of
+    :meth:`Intrinsics.distort` (a smooth polynomial: exact to ~1e-9), the rest analytically.
+    """
+    xc = pose.to_camera(points)
+    z = xc[:, 2]
+    safe = np.where(np.abs(z) > 1e-12, z, 1e-12)
+    xy = xc[:, :2] / safe[:, None]
+    uv = intrinsics.project_camera(xc)
+    dxy = np.zeros((len(points), 2, 3))
+    dxy[:, 0, 0] = 1.0 / safe
+    dxy[:, 1, 1] = 1.0 / safe
+    dxy[:, 0, 2] = -xy[:, 0] / safe
+    dxy[:, 1, 2] = -xy[:, 1] / safe
+    if intrinsics.distortion().any():
+        h = 1e-6
+        ddist = np.empty((len(points), 2, 2))
+        for k in range(2):
+            step = np.zeros(2)
+            step[k] = h
+            ddist[:, :, k] = (intrinsics.distort(xy + step) - intrinsics.distort(xy - step)) / (
+                2 * h
+            )
+        dxy = np.einsum("mab,mbc->mac", ddist, dxy)
+    focal = np.diag(intrinsics.K)[:2]
+    duv = focal[None, :, None] * dxy
+    return uv, duv @ pose.R

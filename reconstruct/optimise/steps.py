@@ -1,0 +1,373 @@
+"""The paper's optimisation steps (Sec. 3.4): light offset from 0, a light-only stage with the
+vertices fixed, then joint stages; between stages the observation set is rebuilt from the current
+mesh — shadow masks by ray casting to the current lights, projections inside the image and off
+saturated pixels, photometric weights and geometric scales — until the parameters settle.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from calibration.basis import SpectralBasis
+from calibration.errors import RigError
+from calibration.estimation import estimate_reflectance
+from reconstruct.forward import shading
+from reconstruct.optimise.cost import JointCost, Robust
+from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
+from reconstruct.optimise.problem import Frames, LightMode, Observations, Problem, Rig, Weights
+from reconstruct.optimise.sampling import bilinear, taps_valid
+from reconstruct.optimise.solver import IterationRecord, SolverSettings, levenberg_marquardt
+from reconstruct.optimise.weights import edge_scale, photometric_weights
+from reconstruct.raycast import RayCaster
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class OptimiseSettings:
+    """Settings of the joint optimisation (the ``optimise:`` section of a reconstruct config)."""
+
+    gamma: tuple[float, float, float] = (0.01, 2.0, 0.01)
+    # The rendering term is evaluated in 8-bit units (image value × 255), as in the paper's
+    # implementation: in 0..1 linear units the paper's γ over-regularise by 255² (the light
+    # distance then trades against the reflectance scale; light z off by centimetres).
+    rendering_scale: float = 255.0
+    light_mode: LightMode = "offset"
+    robust: Robust = "none"
+    robust_scale: float = 0.02  # linear image units: RGB error where the robust loss bends
+    outer_iterations: int = 3
+    light_iterations: int = 15
+    joint_iterations: int = 15
+    optimise_positions: bool = True
+    # "normal": each vertex moves along its normal (fixed per joint stage); "free": in 3-D as
+    # in the paper. Shading and the geometric term are blind to tangential motion, so free
+    # vertices drift in textureless regions and can fold into spikes that cast false shadows.
+    position_motion: str = "normal"
+    settle_position: float = 0.02  # stop when no vertex moved more than this × mean edge length
+    settle_light_m: float = 1e-4
+    sigma_chroma: float = 0.03
+    sigma_intensity: float = 0.25
+    init_smoothness: float = 1e-3
+    margin_px: float = 1.0
+    # Observations seen at grazing angles (cos(normal, view) below this) are dropped: their
+    # bilinear taps straddle the silhouette and mix in the background.
+    min_view_cos: float = 0.3
+    shadow_eps: float = 1e-4
+    solver: SolverSettings = field(default_factory=SolverSettings)
+
+    @classmethod
+    def from_mapping(
+        cls, conf: Mapping[str, Any] | None, where: str = "config"
+    ) -> OptimiseSettings:
+        """Settings from a mapping (YAML); unknown keys are an error naming the key."""
+        conf = dict(conf or {})
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(conf) - known)
+        if unknown:
+            raise RigError(
+                f"{where}: unknown optimise setting(s) {', '.join(unknown)}",
+                f"use only {', '.join(sorted(known))}",
+            )
+        solver = dict(conf.pop("solver", {}) or {})
+        sknown = {f.name for f in fields(SolverSettings)}
+        if set(solver) - sknown:
+            raise RigError(
+                f"{where}: unknown solver setting(s) {', '.join(sorted(set(solver) - sknown))}",
+                f"use only {', '.join(sorted(sknown))}",
+            )
+        out = cls(**conf, solver=SolverSettings(**solver))
+        out.gamma = tuple(float(g) for g in out.gamma)  # type: ignore[assignment]
+        if len(out.gamma) != 3 or min(out.gamma) < 0:
+            raise RigError(
+                f"{where}: gamma must be three non-negative numbers", "e.g. [0.01, 2, 0.01]"
+            )
+        if out.position_motion not in ("normal", "free"):
+            raise RigError(
+                f"{where}: position_motion {out.position_motion!r} is unknown", "use normal or free"
+            )
+        if out.robust not in ("none", "huber", "cauchy"):
+            raise RigError(
+                f"{where}: robust loss {out.robust!r} is unknown", "use none, huber or cauchy"
+            )
+        return out
+
+
+@dataclass
+class OptimiseInput:
+    """The reconstruction's first half, as the optimiser needs it.
+
+    ``visibility`` (N, N_views) bool: V(i) per view. Observed colours come from
+    ``frames.images`` (sampled at the projections) or, without images, from ``observed``
+    (N, F, 3), NaN where not observed.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    visibility: np.ndarray
+    rig: Rig
+    frames: Frames
+    basis: SpectralBasis
+    observed: np.ndarray | None = None
+    initial_light: np.ndarray | None = None
+    initial_alpha: np.ndarray | None = None
+
+
+@dataclass
+class OptimiseResult:
+    vertices: np.ndarray
+    faces: np.ndarray
+    alpha: np.ndarray
+    reflectance: np.ndarray
+    light: np.ndarray  # offset (1, 3) or free positions (N_views, 3)
+    light_positions: np.ndarray  # (N_views, 3)
+    observed: np.ndarray  # vertices with at least one observation in the last solve (N,) bool
+    n_observations: int
+    history: list[dict[str, Any]]
+    stage_seconds: dict[str, float]
+    initial_alpha: np.ndarray
+
+
+Progress = Callable[[str, IterationRecord], None]
+
+
+def light_positions(rig: Rig, mode: LightMode, light: np.ndarray) -> np.ndarray:
+    light = np.asarray(light, dtype=float).reshape(-1, 3)
+    if mode == "free":
+        return light
+    return np.stack([pose.light_position(light[0]) for pose in rig.poses])
+
+
+def build_problem(
+    inp: OptimiseInput, X: np.ndarray, light: np.ndarray, cfg: OptimiseSettings
+) -> Problem:
+    """The observation set and frozen weights at the current estimate (see module doc)."""
+    n = len(X)
+    normals, _ = vertex_normals(X, inp.faces)
+    P = light_positions(inp.rig, cfg.light_mode, light)
+    fr = inp.frames
+    if inp.visibility.shape != (n, inp.rig.n_views):
+        raise RigError(
+            f"visibility has shape {inp.visibility.shape}, expected ({n}, {inp.rig.n_views})",
+            "give one column per view of the poses",
+        )
+    verts, frame_ids = [], []
+    for f in range(fr.count):
+        vis = np.flatnonzero(inp.visibility[:, fr.view[f]])
+        verts.append(vis)
+        frame_ids.append(np.full(vis.size, f, dtype=np.int64))
+    vertex = np.concatenate(verts) if verts else np.zeros(0, np.int64)
+    frame = np.concatenate(frame_ids) if frame_ids else np.zeros(0, np.int64)
+    view = fr.view[frame]
+    keep = np.ones(vertex.size, dtype=bool)
+    observed = np.zeros((vertex.size, 3))
+    if inp.observed is not None:
+        observed = inp.observed[vertex, frame]
+        keep &= np.all(np.isfinite(observed), axis=1)
+    else:
+        assert fr.images is not None and fr.valid is not None
+        for c in range(inp.rig.n_views):
+            idx = np.flatnonzero(view == c)
+            if idx.size == 0:
+                continue
+            uv = inp.rig.intrinsics[c].project_camera(inp.rig.poses[c].to_camera(X[vertex[idx]]))
+            keep[idx] &= taps_valid(fr.valid, frame[idx], uv, cfg.margin_px)
+            observed[idx] = bilinear(fr.images, frame[idx], np.nan_to_num(uv))[0]
+    s = shading(X[vertex], normals[vertex], P[view])
+    keep &= s > 0
+    centres = np.stack([pose.center for pose in inp.rig.poses])
+    to_cam = centres[view] - X[vertex]
+    cos_view = np.einsum("ij,ij->i", normals[vertex], to_cam) / np.linalg.norm(to_cam, axis=1)
+    keep &= cos_view >= cfg.min_view_cos
+    # Shadow masks: one ray per distinct (vertex, view), shared by that view's illuminations.
+    pair = vertex * inp.rig.n_views + view
+    upair, inverse = np.unique(pair[keep], return_inverse=True)
+    pv, pc = upair // inp.rig.n_views, upair % inp.rig.n_views
+    blocked = RayCaster(X, inp.faces).occluded(X[pv], P[pc], cfg.shadow_eps, normals[pv])
+    lit = np.ones(vertex.size, dtype=bool)
+    lit[np.flatnonzero(keep)] = ~blocked[inverse]
+    keep &= lit
+    fixed = observed[keep] if inp.observed is not None else None
+    obs = Observations.build(vertex[keep], frame[keep], fr, n, fixed)
+    adj = adjacency(inp.faces, n)
+    e = edges(adj)
+    order = np.lexsort((frame[keep], view[keep], vertex[keep]))
+    w = photometric_weights(
+        e,
+        obs.vertex,
+        obs.illumination,
+        observed[keep][order],
+        s[keep][order],
+        n,
+        inp.rig.responses.shape[0],
+        cfg.sigma_chroma,
+        cfg.sigma_intensity,
+    )
+    weights = Weights(cfg.gamma, e, w, edge_scale(X, adj), cfg.rendering_scale)
+    return Problem(inp.faces, n, inp.basis.B, inp.rig, fr, obs, weights, cfg.light_mode)
+
+
+def initial_reflectance(
+    problem: Problem, theta: np.ndarray, basis: SpectralBasis, smoothness: float
+) -> np.ndarray:
+    """α from the calibration module's 2-D estimate, per vertex, with the current shading:
+    each (vertex, illumination)'s observations are pooled by least squares into one RGB and a
+    shading weight; vertices never observed get the mean α."""
+    cost = JointCost(problem)
+    X, A, light = problem.unpack(theta)
+    normals, _ = vertex_normals(X, problem.faces)
+    st = cost.render(X, A, light, normals, derivatives=False)
+    y_obs = st.s[:, None] * st.colour - st.error
+    o = problem.obs
+    n, k = problem.n_vertices, problem.rig.responses.shape[0]
+    s2 = np.zeros((n, k))
+    sy = np.zeros((n, k, 3))
+    np.add.at(s2, (o.vertex, o.illumination), st.s**2)
+    np.add.at(sy, (o.vertex, o.illumination), st.s[:, None] * y_obs)
+    seen = s2 > 0
+    root = np.sqrt(s2)
+    rgb = np.full((n, k, 3), np.nan)
+    rgb[seen] = sy[seen] / root[seen][:, None]  # = root · (Σ s y / Σ s²)
+    alpha = np.full((n, basis.n_components), np.nan)
+    rows = np.flatnonzero(seen.any(axis=1))
+    if rows.size:
+        alpha[rows], _ = estimate_reflectance(
+            rgb[rows], problem.rig.responses, basis, smoothness, shading=root[rows]
+        )
+    good = np.all(np.isfinite(alpha), axis=1)
+    fill = alpha[good].mean(axis=0) if good.any() else basis.project(np.full(basis.B.shape[0], 0.5))
+    alpha[~good] = fill
+    return alpha
+
+
+def optimise(
+    inp: OptimiseInput,
+    settings: OptimiseSettings | None = None,
+    progress: Progress | None = None,
+) -> OptimiseResult:
+    """Run the paper's optimisation steps and return the refined mesh, reflectance and light."""
+    cfg = settings or OptimiseSettings()
+    X = np.array(inp.vertices, dtype=float)
+    n_views = inp.rig.n_views
+    if inp.initial_light is not None:
+        light = np.asarray(inp.initial_light, dtype=float).reshape(-1, 3)
+    elif cfg.light_mode == "offset":
+        light = np.zeros((1, 3))  # paper: v starts at the camera centre
+    else:
+        light = np.stack([pose.center for pose in inp.rig.poses])
+    if light.shape != ((1, 3) if cfg.light_mode == "offset" else (n_views, 3)):
+        raise RigError(
+            f"initial light has shape {light.shape} for light mode {cfg.light_mode}",
+            "give one offset (3,) or one position per view (N_views, 3)",
+        )
+    history: list[dict[str, Any]] = []
+    seconds: dict[str, float] = {}
+    nb = inp.basis.n_components
+
+    def run(
+        stage: str,
+        outer: int,
+        problem: Problem,
+        theta: np.ndarray,
+        mask: np.ndarray,
+        iterations: int,
+        directions: np.ndarray | None = None,
+    ) -> np.ndarray:
+        t0 = time.perf_counter()
+        cost = JointCost(problem, cfg.robust, cfg.robust_scale)
+        start = cost.terms(theta)
+        history.append(
+            {
+                "stage": stage,
+                "outer": outer,
+                "iteration": 0,
+                "terms": start,
+                "step": 0.0,
+                "lambda": None,
+                "cg_iterations": 0,
+                "accepted": True,
+                "seconds": 0.0,
+                "observations": problem.obs.count,
+            }
+        )
+
+        def record(rec: IterationRecord) -> None:
+            history.append(
+                {
+                    "stage": stage,
+                    "outer": outer,
+                    "iteration": rec.iteration,
+                    "terms": rec.terms,
+                    "step": rec.step_norm,
+                    "lambda": rec.lam,
+                    "cg_iterations": rec.cg_iterations,
+                    "accepted": rec.accepted,
+                    "seconds": rec.seconds,
+                    "observations": problem.obs.count,
+                }
+            )
+            if progress:
+                progress(f"{stage} {outer}", rec)
+
+        solver = SolverSettings(**{**cfg.solver.__dict__, "max_iterations": iterations})
+        result = levenberg_marquardt(cost, theta, mask, solver, record, directions)
+        seconds[stage] = seconds.get(stage, 0.0) + time.perf_counter() - t0
+        log.info(
+            "%s %d: %s after %d iterations", stage, outer, result.stop_reason, len(result.history)
+        )
+        return result.theta
+
+    t0 = time.perf_counter()
+    A0 = np.zeros((len(X), nb)) if inp.initial_alpha is None else np.asarray(inp.initial_alpha)
+    problem = build_problem(inp, X, light, cfg)
+    if problem.obs.count == 0:
+        raise RigError(
+            "no vertex is observed in any frame (all outside the images, saturated or shadowed)",
+            "check the poses and the initial mesh, and the exposure of the captures",
+        )
+    theta = problem.pack(X, A0, light)
+    if inp.initial_alpha is None:
+        A0 = initial_reflectance(problem, theta, inp.basis, cfg.init_smoothness)
+        theta = problem.pack(X, A0, light)
+    seconds["setup"] = time.perf_counter() - t0
+    theta = run("light", 0, problem, theta, problem.mask(False, True, True), cfg.light_iterations)
+    for outer in range(1, cfg.outer_iterations + 1 if cfg.optimise_positions else 1):
+        t0 = time.perf_counter()
+        X_prev, _, light_prev = problem.unpack(theta)
+        X_prev, light_prev = X_prev.copy(), light_prev.copy()
+        problem = build_problem(inp, X_prev, light_prev, cfg)
+        seconds["shadows"] = seconds.get("shadows", 0.0) + time.perf_counter() - t0
+        # Vertices no view observes have no data term: only the geometric term (blind to
+        # tangential motion) would move them, so they keep their positions.
+        mask = problem.mask(True, True, True)
+        mask[problem.slices()[0]] = np.repeat(problem.obs.per_vertex > 0, 3)
+        directions = None
+        if cfg.position_motion == "normal":
+            directions, _ = vertex_normals(X_prev, problem.faces)
+        theta = run("joint", outer, problem, theta, mask, cfg.joint_iterations, directions)
+        X_new, _, light_new = problem.unpack(theta)
+        moved = float(np.max(np.linalg.norm(X_new - X_prev, axis=1)))
+        light_moved = float(np.max(np.linalg.norm(light_new - light_prev, axis=1)))
+        tol = cfg.settle_position * float(np.mean(problem.weights.scale))
+        log.info("outer %d: vertices moved ≤ %.3g m, light ≤ %.3g m", outer, moved, light_moved)
+        if moved <= tol and light_moved <= cfg.settle_light_m:
+            break
+    X, A, light = problem.unpack(theta)
+    return OptimiseResult(
+        vertices=X.copy(),
+        faces=np.asarray(inp.faces),
+        alpha=A.copy(),
+        reflectance=inp.basis.reconstruct(A),
+        light=light.copy(),
+        light_positions=light_positions(inp.rig, cfg.light_mode, light),
+        observed=problem.obs.per_vertex > 0,
+        n_observations=problem.obs.count,
+        history=history,
+        stage_seconds=seconds,
+        initial_alpha=A0,
+    )

@@ -1,0 +1,296 @@
+"""``rig reconstruct`` as a library call: the front stages (decode → poses → initial mesh →
+visibility → subdivide), the joint optimisation, and the files of ``SESSION/recon/``.
+
+Config (YAML, all optional): the front's sections ``decode``, ``poses``, ``mesh``,
+``visibility``, ``subdivide`` and ``optimise`` (:class:`OptimiseSettings`, with ``solver``).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from calibration.basis import SpectralBasis, default_basis
+from calibration.errors import RigError
+from calibration.grid import DEFAULT_GRID
+from calibration.store import CalibrationStore
+from reconstruct import export, plots
+from reconstruct.camera import Intrinsics
+from reconstruct.decode import load_frame
+from reconstruct.forward import response_matrix
+from reconstruct.front import FrontResult, run_front
+from reconstruct.optimise.mesh import vertex_normals
+from reconstruct.optimise.problem import Frames, Rig
+from reconstruct.optimise.solver import IterationRecord
+from reconstruct.optimise.steps import OptimiseInput, OptimiseResult, OptimiseSettings, optimise
+from reconstruct.raycast import RayCaster
+from reconstruct.relight import Camera, encode_srgb, relight
+from reconstruct.session import RECON_DIR, Session
+from reconstruct.stages import record_timing
+
+log = logging.getLogger("reconstruct")
+FRONT_SECTIONS = ("decode", "poses", "mesh", "visibility", "subdivide")
+Progress = Callable[[str, IterationRecord], None]
+
+
+@dataclass
+class Reconstruction:
+    recon_dir: Path
+    mesh_path: Path
+    reflectance_path: Path
+    report_path: Path
+    plots: list[Path]
+    result: OptimiseResult
+    report: dict[str, Any]
+
+
+def load_config(path: Path | None) -> dict[str, Any]:
+    """The reconstruct config file as a mapping (empty without a file)."""
+    if path is None:
+        return {}
+    try:
+        data = yaml.safe_load(Path(path).read_text()) or {}
+    except (OSError, yaml.YAMLError) as error:
+        raise RigError(
+            f"cannot read config {path}: {error}", "give a readable YAML file"
+        ) from error
+    if not isinstance(data, dict):
+        raise RigError(f"config {path} is not a mapping", "write sections like `optimise: {...}`")
+    unknown = set(data) - {*FRONT_SECTIONS, "optimise"}
+    if unknown:
+        raise RigError(
+            f"config {path}: unknown section(s) {', '.join(sorted(unknown))}",
+            f"use {', '.join((*FRONT_SECTIONS, 'optimise'))}",
+        )
+    return data
+
+
+def session_spectra(session: Session, names: list[str]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Camera sensitivity and the SPD of each illumination from the session's calibration
+    snapshot (entries named in ``session.yaml`` → ``calibration``)."""
+    cal = session.info.get("calibration") or {}
+    if not session.calibration_dir.is_dir() or "camera" not in cal:
+        raise RigError(
+            f"{session.root} has no calibration snapshot (calibration/ and session.yaml "
+            "calibration.camera)",
+            "capture with a profile that names a calibration store",
+        )
+    store = CalibrationStore(session.calibration_dir)
+    camera = store.camera(str(cal["camera"]), DEFAULT_GRID)
+    lights = cal.get("lights") or {}
+    spds = {}
+    for name in names:
+        entry = str(lights.get(name, name))
+        if entry not in store.names("light"):
+            raise RigError(
+                f"illumination {name!r} has no SPD in {session.calibration_dir} (entry {entry!r})",
+                "measure it with `rig calibrate light` or name its store entry in the profile",
+            )
+        spds[name] = store.light_spd(entry, DEFAULT_GRID)
+    return camera, spds
+
+
+def _scaled(intr: Intrinsics, width: int, height: int) -> Intrinsics:
+    """Intrinsics of another image size (SfM may run on downscaled images)."""
+    if (intr.width, intr.height) == (width, height):
+        return intr
+    s = width / intr.width
+    if abs(height / intr.height - s) > 1e-3:
+        raise RigError(
+            f"decoded frames are {width}x{height} but the camera is {intr.width}x{intr.height}",
+            "re-run the poses stage on the decoded frames",
+        )
+    names = {"f", "fx", "fy", "cx", "cy"}
+    from reconstruct.camera import CAMERA_MODELS
+
+    params = tuple(
+        p * s if n in names else p
+        for n, p in zip(CAMERA_MODELS[intr.model], intr.params, strict=True)
+    )
+    return Intrinsics(intr.model, width, height, params)
+
+
+def optimiser_input(front: FrontResult, session: Session, basis: SpectralBasis) -> OptimiseInput:
+    """Arrays the optimiser needs from the front's outputs and the calibration snapshot."""
+    views = sorted(front.poses)
+    column = {v: k for k, v in enumerate(views)}
+    plan = (session.info.get("plan") or {}).get("illuminations")
+    lit = set(plan) if isinstance(plan, list) else None  # ambient / pattern frames are not lit
+    keys = sorted(k for k in front.frames if k[0] in column and (lit is None or k[1] in lit))
+    if not keys:
+        raise RigError(
+            "no decoded frame under a named illumination belongs to a posed view",
+            "check the poses stage output and the session's plan.illuminations",
+        )
+    names = sorted({k[1] for k in keys})
+    camera, spds = session_spectra(session, names)
+    responses = np.stack([response_matrix(camera, spds[n]) for n in names])
+    images, valid = [], []
+    for key in keys:
+        img, sat = load_frame(front.decoded_dir, front.frames[key])
+        images.append(img)
+        valid.append(~sat)
+    h, w = images[0].shape[:2]
+    frames = Frames(
+        np.array([column[k[0]] for k in keys]),
+        np.array([names.index(k[1]) for k in keys]),
+        np.stack(images).astype(np.float32),
+        np.stack(valid),
+    )
+    intr = [_scaled(front.intrinsics[v], w, h) for v in views]
+    rig = Rig(intr, [front.poses[v] for v in views], responses)
+    mesh = front.mesh
+    vis = front.visibility
+    n = len(mesh.vertices)
+    matrix = np.zeros((n, len(views)), dtype=bool)
+    vi, col = vis.pairs()
+    view_of = np.asarray(vis.views)[col]
+    known = np.isin(view_of, views)
+    matrix[vi[known], [column[int(v)] for v in view_of[known]]] = True
+    return OptimiseInput(
+        vertices=np.asarray(mesh.vertices, dtype=float),
+        faces=np.asarray(mesh.faces, dtype=np.int64),
+        visibility=matrix,
+        rig=rig,
+        frames=frames,
+        basis=basis,
+    )
+
+
+def export_result(
+    recon_dir: Path,
+    inp: OptimiseInput,
+    result: OptimiseResult,
+    settings: OptimiseSettings,
+    extra: dict[str, Any],
+    preview_views: int = 3,
+) -> tuple[list[Path], dict[str, Any], Path, Path, Path]:
+    """Write mesh.ply, reflectance.npz, report.json and the plots."""
+    recon_dir.mkdir(parents=True, exist_ok=True)
+    wl = inp.basis.wavelengths_nm
+    normals, _ = vertex_normals(result.vertices, result.faces)
+    mesh_path = export.write_ply(
+        recon_dir / export.MESH_FILE, result.vertices, result.faces, normals, result.reflectance, wl
+    )
+    npz = export.write_reflectance_npz(
+        recon_dir / export.REFLECTANCE_FILE,
+        result.vertices,
+        result.faces,
+        normals,
+        wl,
+        result.reflectance,
+        result.alpha,
+        inp.basis.B,
+        result.observed,
+    )
+    rig = inp.rig
+    figures = [
+        plots.cameras_and_lights(
+            recon_dir / "cameras_lights.png", rig.poses, result.light_positions, result.vertices
+        ),
+        plots.cost_curve(recon_dir / "cost.png", result.history),
+    ]
+    rng = np.random.default_rng(0)
+    seen = np.flatnonzero(result.observed)
+    sample = np.sort(rng.choice(seen, size=min(6, seen.size), replace=False)) if seen.size else seen
+    figures.append(
+        plots.spectra(
+            recon_dir / "spectra.png",
+            wl,
+            result.reflectance,
+            sample,
+            initial=inp.basis.reconstruct(result.initial_alpha),
+        )
+    )
+    caster = RayCaster(result.vertices, result.faces)
+    for c in np.linspace(0, rig.n_views - 1, min(preview_views, rig.n_views)).astype(int):
+        img = relight(
+            result.vertices,
+            result.faces,
+            result.reflectance,
+            wl,
+            Camera(rig.intrinsics[c], rig.poses[c]),
+            result.light_positions[c],
+            "D65",
+            caster=caster,
+        )
+        figures.append(
+            plots.image(
+                recon_dir / f"preview_view{c:03d}.png",
+                encode_srgb(img),
+                f"view {c}: estimated reflectance under D65 at the estimated light",
+            )
+        )
+    offset = result.light[0] if settings.light_mode == "offset" else None
+    report = {
+        "light": {
+            "mode": settings.light_mode,
+            "offset_m": None if offset is None else offset.tolist(),
+            "positions_m": result.light_positions.tolist(),
+        },
+        "vertices": len(result.vertices),
+        "faces": len(result.faces),
+        "observed_vertices": int(result.observed.sum()),
+        "observations": result.n_observations,
+        "history": result.history,
+        "timings_s": {**extra.pop("timings_s", {}), **result.stage_seconds},
+        "settings": asdict(settings),
+        **extra,
+    }
+    report_path = export.write_report(recon_dir / export.REPORT_FILE, report)
+    return figures, report, mesh_path, npz, report_path
+
+
+def run_reconstruction(
+    session_dir: Path,
+    config: Mapping[str, Any] | None = None,
+    initial_mesh: Path | None = None,
+    progress: Progress | None = None,
+    basis: SpectralBasis | None = None,
+) -> Reconstruction:
+    """Both halves of the pipeline on a session; outputs in ``SESSION/recon/``."""
+    session_dir = Path(session_dir)
+    conf = dict(config or {})
+    settings = OptimiseSettings.from_mapping(conf.pop("optimise", None), "config optimise")
+    session = Session.open(session_dir)
+    t0 = time.perf_counter()
+    front = run_front(
+        session_dir, {k: v for k, v in conf.items() if k in FRONT_SECTIONS}, initial_mesh
+    )
+    t_front = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    inp = optimiser_input(front, session, basis or default_basis())
+    t_load = time.perf_counter() - t0
+    recon = session_dir / RECON_DIR
+    t0 = time.perf_counter()
+    result = optimise(inp, settings, progress)
+    record_timing(recon, "optimise", time.perf_counter() - t0, False)
+    t0 = time.perf_counter()
+    absolute = front.scale_is_metric
+    extra = {
+        "reflectance_scale_absolute": bool(absolute),
+        "reflectance_scale_note": (
+            "absolute: metric poses and radiometrically scaled calibration SPDs"
+            if absolute
+            else "relative: poses have no metric scale, so the light distance and the "
+            "reflectance scale are only known up to a common factor"
+        ),
+        "poses": {"source": front.pose_summary.source, "scale": front.pose_summary.scale},
+        "initial_mesh": str(front.mesh_path),
+        "illuminations": sorted({k[1] for k in front.frames}),
+        "timings_s": {"front": t_front, "load_frames": t_load},
+    }
+    figures, report, mesh_path, npz, report_path = export_result(
+        recon, inp, result, settings, extra
+    )
+    report["timings_s"]["export"] = time.perf_counter() - t0
+    export.write_report(report_path, report)
+    record_timing(recon, "export", report["timings_s"]["export"], False)
+    return Reconstruction(recon, mesh_path, npz, report_path, figures, result, report)

@@ -1,0 +1,134 @@
+"""The joint cost: residuals from the forward model, every Jacobian block against finite
+differences, and the factored Gauss–Newton pieces against the explicit sparse Jacobian."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from reconstruct.forward import render_values, response_matrix, shading
+from reconstruct.optimise.cost import JointCost
+from reconstruct.optimise.solver import ArrowheadPreconditioner
+from reconstruct.optimise.synthetic import SyntheticScene
+from tests.optimise.conftest import cost_at, problem_at
+
+
+def test_rendering_residual_is_zero_at_the_truth(scene: SyntheticScene) -> None:
+    problem, _ = problem_at(scene, images=False)
+    cost = JointCost(problem)
+    theta = problem.pack(scene.vertices, scene.alpha, scene.light_offset)
+    terms = cost.terms(theta)
+    assert terms["rendering"] < 1e-20
+    assert terms["total"] == pytest.approx(float(np.sum(cost.residuals(theta) ** 2)))
+
+
+def test_rendering_uses_the_forward_model(scene: SyntheticScene) -> None:
+    problem, theta = problem_at(scene, images=False)
+    cost = JointCost(problem)
+    X, A, light = problem.unpack(theta)
+    normals, _ = cost.geometry(X, False).normals, None
+    st = cost.render(X, A, light, normals, derivatives=False)
+    o = problem.obs
+    P = problem.light_positions(light)
+    i = o.vertex[:50]
+    s = shading(X[i], normals[i], P[o.view[:50]])
+    refl = scene.basis.reconstruct(A[i])
+    for k in range(2):
+        sel = o.illumination[:50] == k
+        y = render_values(refl[sel], s[sel], problem.rig.responses[k])
+        assert np.allclose(st.s[:50][sel, None] * st.colour[:50][sel], y)
+    assert np.allclose(problem.rig.responses[0], response_matrix_like(problem.rig.responses[0]))
+
+
+def response_matrix_like(resp: np.ndarray) -> np.ndarray:
+    """Rebuild a response from its own rows (C^T diag(L) with L = 1): a shape check."""
+    return response_matrix(resp.T, np.ones(resp.shape[1]))
+
+
+@pytest.mark.parametrize("mode", ["offset", "free"])
+@pytest.mark.parametrize("images", [False, True])
+def test_jacobian_blocks_match_finite_differences(
+    scene: SyntheticScene, image_scene: SyntheticScene, mode: str, images: bool
+) -> None:
+    sc = image_scene if images else scene
+    cost, theta = cost_at(sc, images, mode)
+    J = cost.jacobian(theta)
+    assert J.shape == (cost.residuals(theta).size, theta.size)
+    rng = np.random.default_rng(4)
+    sx, sa, sl = cost.p.slices()
+    for block, scale in ((sx, 1e-4), (sa, 1.0), (sl, 1e-2)):
+        d = np.zeros_like(theta)
+        d[block] = scale * rng.normal(size=block.stop - block.start)
+        h = 1e-6
+        fd = (cost.residuals(theta + h * d) - cost.residuals(theta - h * d)) / (2 * h)
+        an = J @ d
+        assert np.linalg.norm(fd - an) <= 1e-6 * np.linalg.norm(an)
+
+
+@pytest.mark.parametrize("mode", ["offset", "free"])
+@pytest.mark.parametrize("images", [False, True])
+def test_factored_normal_equations_match_explicit_jacobian(
+    scene: SyntheticScene, image_scene: SyntheticScene, mode: str, images: bool
+) -> None:
+    sc = image_scene if images else scene
+    cost, theta = cost_at(sc, images, mode)
+    J = cost.jacobian(theta)
+    r = cost.residuals(theta)
+    lin = cost.linearise(theta)
+    g = J.T @ r
+    assert np.allclose(lin.gradient(), g, rtol=1e-9, atol=1e-9 * np.abs(g).max())
+    v = np.random.default_rng(5).normal(size=theta.size)
+    hv = J.T @ (J @ v)
+    assert np.allclose(lin.matvec(v), hv, rtol=1e-9, atol=1e-9 * np.abs(hv).max())
+    H = (J.T @ J).tocsr()
+    hmax = np.abs(H.data).max()
+    vert, light = lin.diagonal_blocks()
+    n, nb = cost.p.n_vertices, cost.p.n_basis
+    nx = 3 * n
+    for i in range(0, n, 7):
+        idx = np.r_[3 * i : 3 * i + 3, nx + nb * i : nx + nb * (i + 1)]
+        assert np.allclose(vert[i], H[idx][:, idx].toarray(), atol=1e-9 * hmax)
+    for j in range(len(light)):
+        idx = sl_index(cost, j)
+        assert np.allclose(light[j], H[idx][:, idx].toarray(), atol=1e-9 * hmax)
+
+
+def sl_index(cost: JointCost, j: int) -> np.ndarray:
+    sl = cost.p.slices()[2]
+    return np.arange(sl.start + 3 * j, sl.start + 3 * j + 3)
+
+
+@pytest.mark.parametrize("mode", ["offset", "free"])
+def test_preconditioner_inverts_the_bordered_block_diagonal(
+    scene: SyntheticScene, mode: str
+) -> None:
+    cost, theta = cost_at(scene, False, mode)
+    lin = cost.linearise(theta)
+    blocks = lin.diagonal_blocks()
+    p = cost.p
+    mask = p.mask(True, True, True)
+    scale = np.ones(p.size)
+    lam = 0.1
+    pre = ArrowheadPreconditioner(lin, blocks, lam, scale, mask)
+    # Dense version of the approximated matrix: vertex blocks, light blocks, coupling.
+    n, nb = p.n_vertices, p.n_basis
+    k = 3 + nb
+    order = np.concatenate(
+        [np.r_[3 * i : 3 * i + 3, 3 * n + nb * i : 3 * n + nb * (i + 1)] for i in range(n)]
+        + [np.arange(p.slices()[2].start, p.size)]
+    )
+    M = np.zeros((p.size, p.size))
+    vert, light = blocks
+    for i in range(n):
+        M[k * i : k * i + k, k * i : k * i + k] = vert[i] + lam * np.eye(k)
+    nl = p.n_light
+    for j in range(nl // 3):
+        M[n * k + 3 * j : n * k + 3 * j + 3, n * k + 3 * j : n * k + 3 * j + 3] = light[j]
+    M[n * k :, n * k :] += lam * np.eye(nl)
+    coupling = lin.light_coupling()
+    C = coupling.reshape(n * k, 3) if isinstance(coupling, np.ndarray) else coupling.toarray()
+    M[: n * k, n * k :] = C
+    M[n * k :, : n * k] = C.T
+    v = np.random.default_rng(6).normal(size=p.size)
+    z = pre(v)
+    assert np.allclose(M @ z[order], v[order], rtol=1e-8, atol=1e-8 * np.abs(v).max())

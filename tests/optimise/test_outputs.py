@@ -1,0 +1,220 @@
+"""Export files (PLY, npz, report), relighting, evaluation and the commands reading them."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+import yaml
+
+from calibration.errors import RigError
+from reconstruct import export
+from reconstruct.evaluate import evaluate, surface_distance
+from reconstruct.optimise.mesh import vertex_normals
+from reconstruct.optimise.steps import OptimiseResult, OptimiseSettings
+from reconstruct.optimise.synthetic import SyntheticScene
+from reconstruct.pipeline import export_result
+from reconstruct.relight import Camera, encode_srgb, relight
+from rig.cli import main
+
+
+@pytest.fixture(scope="module")
+def recon_dir(tmp_path_factory: pytest.TempPathFactory, scene: SyntheticScene) -> Path:
+    """A reconstruction folder written by the exporter from the true scene."""
+    out = tmp_path_factory.mktemp("session") / "recon"
+    n = len(scene.vertices)
+    light = scene.light_offset[None]
+    result = OptimiseResult(
+        vertices=scene.vertices,
+        faces=scene.faces,
+        alpha=scene.alpha,
+        reflectance=scene.reflectance,
+        light=light,
+        light_positions=np.stack([p.light_position(scene.light_offset) for p in scene.rig.poses]),
+        observed=np.ones(n, bool),
+        n_observations=10,
+        stage_seconds={"joint": 1.0},
+        history=[
+            {
+                "stage": "joint",
+                "outer": 1,
+                "iteration": 0,
+                "accepted": True,
+                "terms": {
+                    "total": 2.0,
+                    "rendering": 1.0,
+                    "spectral": 0.5,
+                    "photometric": 0.3,
+                    "geometric": 0.2,
+                },
+            }
+        ],
+        initial_alpha=scene.alpha,
+    )
+    export_result(
+        out, scene.input(), result, OptimiseSettings(), {"reflectance_scale_absolute": True}
+    )
+    return out
+
+
+def test_ply_reads_back_with_trimesh_and_plain_parsing(
+    recon_dir: Path, scene: SyntheticScene
+) -> None:
+    path = recon_dir / export.MESH_FILE
+    mesh = trimesh.load(path, process=False)
+    assert np.allclose(mesh.vertices, scene.vertices, atol=1e-7)
+    assert np.array_equal(mesh.faces, scene.faces)
+    raw = mesh.metadata["_ply_raw"]["vertex"]["data"]
+    assert np.allclose(raw["refl_550"], scene.reflectance[:, 15], atol=1e-6)
+    assert mesh.visual.vertex_colors.shape == (len(scene.vertices), 4)
+    text = path.read_bytes().split(b"end_header\n")[0].decode()
+    assert "format binary_little_endian 1.0" in text
+    assert "property float refl_400" in text and "property float refl_700" in text
+    assert "property uchar red" in text
+
+
+def test_npz_and_report_hold_the_fixed_names(recon_dir: Path, scene: SyntheticScene) -> None:
+    data = export.read_reflectance_npz(recon_dir / export.REFLECTANCE_FILE)
+    for key in ("vertices", "faces", "wavelengths_nm", "reflectance", "alpha", "basis"):
+        assert key in data
+    assert data["reflectance"].shape == (len(scene.vertices), 31)
+    report = json.loads((recon_dir / export.REPORT_FILE).read_text())
+    assert np.allclose(report["light"]["offset_m"], scene.light_offset)
+    assert len(report["light"]["positions_m"]) == scene.rig.n_views
+    assert report["reflectance_scale_absolute"] is True
+    assert report["history"][0]["terms"]["total"] == 2.0
+    for name in ("cameras_lights.png", "cost.png", "spectra.png"):
+        assert (recon_dir / name).stat().st_size > 1000
+
+
+def test_evaluation_of_the_truth_and_of_a_shifted_mesh(
+    recon_dir: Path, scene: SyntheticScene, tmp_path: Path
+) -> None:
+    gt_mesh = tmp_path / "gt.ply"
+    trimesh.Trimesh(scene.vertices, scene.faces, process=False).export(gt_mesh)
+    gt_refl = tmp_path / "gt.npy"
+    np.save(gt_refl, scene.reflectance)
+    ev = evaluate(recon_dir, gt_mesh, gt_refl, scene.light_offset + [0.0, 0.003, 0.004])
+    assert ev.accuracy_m < 1e-6 and ev.completeness_m < 1e-6
+    assert ev.spectral_rmse < 1e-6
+    assert ev.light_offset_error_m == pytest.approx(0.005, abs=1e-9)
+    assert (recon_dir / "spectral_error_map.png").is_file()
+    normals, _ = vertex_normals(scene.vertices, scene.faces)
+    d, _, _ = surface_distance(
+        scene.vertices + 0.001 * normals, trimesh.load(gt_mesh, process=False)
+    )
+    assert np.mean(d) == pytest.approx(0.001, rel=0.05)
+
+
+def test_relight_white_is_neutral_under_d65_and_warm_under_a(scene: SyntheticScene) -> None:
+    pose = scene.rig.poses[0]
+    from reconstruct.camera import Intrinsics
+
+    cam = Camera(Intrinsics.pinhole(60, 45, 90.0), pose)
+    white = np.ones_like(scene.reflectance)
+    d65 = relight(
+        scene.vertices, scene.faces, white, scene.basis.wavelengths_nm, cam, pose.center, "D65"
+    )
+    a = relight(
+        scene.vertices, scene.faces, white, scene.basis.wavelengths_nm, cam, pose.center, "A"
+    )
+    centre = d65[20:25, 28:32].reshape(-1, 3).mean(axis=0)
+    assert np.allclose(centre / centre.max(), 1.0, atol=0.02)
+    warm = a[20:25, 28:32].reshape(-1, 3).mean(axis=0)
+    assert warm[0] > 1.5 * warm[2]
+    assert encode_srgb(d65).dtype == np.uint8
+
+
+def test_commands_relight_and_evaluate(
+    recon_dir: Path, scene: SyntheticScene, tmp_path: Path
+) -> None:
+    camera = tmp_path / "cam.yaml"
+    camera.write_text(
+        yaml.safe_dump(
+            {
+                "width": 64,
+                "height": 48,
+                "focal_px": 100.0,
+                "eye": [0.3, 0.0, 0.1],
+                "target": [0, 0, 0],
+            }
+        )
+    )
+    out = tmp_path / "relit.png"
+    session = recon_dir.parent
+    assert (
+        main(
+            [
+                "relight",
+                str(session),
+                "--camera",
+                str(camera),
+                "--illuminant",
+                "A",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    assert out.stat().st_size > 200
+    gt_mesh = tmp_path / "gt.ply"
+    trimesh.Trimesh(scene.vertices, scene.faces, process=False).export(gt_mesh)
+    np.save(tmp_path / "gt.npy", scene.reflectance)
+    assert (
+        main(
+            [
+                "evaluate",
+                str(session),
+                "--gt-mesh",
+                str(gt_mesh),
+                "--gt-reflectance",
+                str(tmp_path / "gt.npy"),
+                "--gt-light-offset",
+                "0.06,-0.02,0",
+            ]
+        )
+        == 0
+    )
+    assert main(["relight", str(session), "--camera", str(camera), "--light-pos", "1,2"]) == 2
+    assert main(["reconstruct", str(tmp_path / "nowhere")]) == 2
+
+
+def test_unknown_settings_name_the_key() -> None:
+    with pytest.raises(RigError, match="gama"):
+        OptimiseSettings.from_mapping({"gama": [1, 2, 3]})
+    with pytest.raises(RigError, match="robust"):
+        OptimiseSettings.from_mapping({"robust": "tukey"})
+    s = OptimiseSettings.from_mapping({"gamma": [0.1, 1, 0.1], "solver": {"max_iterations": 3}})
+    assert s.gamma == (0.1, 1.0, 0.1) and s.solver.max_iterations == 3
+
+
+def test_demo_profile_is_a_valid_sim_profile() -> None:
+    from rig.commands.demo import demo_profile
+    from rig.profile import parse_profile
+
+    profile = parse_profile(demo_profile(12), "demo profile")
+    assert profile.plan.views == 12
+    assert sorted(profile.illuminations) == ["LED1", "LED2"]
+    assert main(["demo", "--views", "3"]) == 2
+
+
+def test_config_errors_name_the_file_and_section(tmp_path: Path) -> None:
+    from reconstruct.pipeline import _scaled, load_config
+
+    bad = tmp_path / "recon.yaml"
+    bad.write_text("optimize: {gamma: [1, 2, 3]}\n")
+    with pytest.raises(RigError, match="optimize"):
+        load_config(bad)
+    good = tmp_path / "ok.yaml"
+    good.write_text("subdivide: {max_faces: 1000}\noptimise: {robust: huber}\n")
+    assert load_config(good)["optimise"]["robust"] == "huber"
+    from reconstruct.camera import Intrinsics
+
+    half = _scaled(Intrinsics.pinhole(640, 480, 800.0), 320, 240)
+    assert half.params == (400.0, 400.0, 160.0, 120.0)
+    with pytest.raises(RigError, match="decoded frames"):
+        _scaled(Intrinsics.pinhole(640, 480, 800.0), 320, 200)

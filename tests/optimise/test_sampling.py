@@ -1,0 +1,61 @@
+"""Bilinear sampling at projections and the projection Jacobian."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from reconstruct.camera import Intrinsics, Pose
+from reconstruct.optimise.sampling import bilinear, project_with_jacobian, taps_valid
+
+
+def test_pixel_centres_and_linear_images_are_exact() -> None:
+    h, w = 7, 9
+    rows, cols = np.mgrid[0:h, 0:w]
+    img = np.stack([2.0 * cols + 3.0 * rows, cols - rows, np.ones_like(cols)], axis=-1)[None]
+    # The centre of element [row, col] is at pixel coordinates (col + 0.5, row + 0.5).
+    value, _ = bilinear(img, np.array([0]), np.array([[3.5, 2.5]]))
+    assert np.allclose(value, img[0, 2, 3])
+    uv = np.array([[1.2, 1.7], [4.9, 3.1], [7.3, 5.8]])
+    value, grad = bilinear(img, np.zeros(3, dtype=int), uv)
+    c, r = uv[:, 0] - 0.5, uv[:, 1] - 0.5
+    assert np.allclose(value[:, 0], 2 * c + 3 * r)
+    assert np.allclose(grad[:, 0], [2.0, 3.0])
+    assert np.allclose(grad[:, 1], [1.0, -1.0])
+    assert np.allclose(grad[:, 2], 0.0)
+
+
+def test_gradient_matches_finite_differences_inside_a_cell() -> None:
+    rng = np.random.default_rng(1)
+    img = rng.uniform(size=(2, 6, 8, 3))
+    uv = np.array([[2.3, 3.2], [5.6, 1.9]])
+    frame = np.array([1, 0])
+    _, grad = bilinear(img, frame, uv)
+    h = 1e-6
+    for k in range(2):
+        d = np.zeros(2)
+        d[k] = h
+        fd = (bilinear(img, frame, uv + d)[0] - bilinear(img, frame, uv - d)[0]) / (2 * h)
+        assert np.allclose(grad[:, :, k], fd, atol=1e-7)
+
+
+def test_taps_valid_excludes_saturated_neighbourhoods_and_borders() -> None:
+    valid = np.ones((1, 6, 6), dtype=bool)
+    valid[0, 3, 3] = False
+    uv = np.array([[3.9, 3.9], [1.6, 1.6], [0.2, 3.0], [np.nan, 2.0]])
+    ok = taps_valid(valid, np.zeros(4, dtype=int), uv, margin=1.0)
+    assert ok.tolist() == [False, True, False, False]
+
+
+def test_projection_jacobian_with_distortion() -> None:
+    intr = Intrinsics("OPENCV", 640, 480, (700.0, 690.0, 320.0, 240.0, -0.2, 0.05, 1e-3, -2e-3))
+    pose = Pose.look_at(np.array([0.4, -0.3, 0.2]), np.zeros(3))
+    rng = np.random.default_rng(2)
+    x = 0.05 * rng.normal(size=(5, 3))
+    uv, duv = project_with_jacobian(intr, pose, x)
+    assert np.allclose(uv, intr.project_camera(pose.to_camera(x)))
+    h = 1e-7
+    for k in range(3):
+        d = np.zeros(3)
+        d[k] = h
+        fd = intr.project_camera(pose.to_camera(x + d)) - intr.project_camera(pose.to_camera(x - d))
+        assert np.allclose(duv[:, :, k], fd / (2 * h), rtol=1e-5, atol=1e-3)
