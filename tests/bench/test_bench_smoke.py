@@ -1,0 +1,79 @@
+"""Each benchmark runs end to end at its ``--quick`` size through its command line and writes
+its tables; the numbers are checked for sense (never for speed)."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def run_bench(module: str, out: Path, *extra: str) -> dict[str, Any]:
+    proc = subprocess.run(
+        [sys.executable, "-m", module, "--quick", "--out", str(out), *extra],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    name = module.rsplit(".", 1)[1]
+    data: dict[str, Any] = json.loads((out / f"{name}.json").read_text())
+    markdown = (out / f"{name}.md").read_text()
+    assert data["machine"]["cpu_count"] >= 1 and data["machine"]["ram_gb"] > 0
+    assert "Machine:" in markdown and "|---|" in markdown
+    assert all(t["rows"] for t in data["tables"])
+    return data
+
+
+@pytest.mark.slow
+def test_capture_bench(tmp_path: Path) -> None:
+    data = run_bench("bench.capture", tmp_path)
+    overhead = data["in_process"]["overhead_ms"]
+    assert data["in_process"]["frames"] == 8 and len(overhead) == 7
+    assert all(ms > 0 for ms in overhead)
+    assert all(ms > 0 for ms in data["components_ms"].values())
+    worker, cli = data["resume"]
+    assert worker["complete_and_verified"] is True
+    assert worker["resume_to_next_frame_s"] > 0 and cli["resume_to_next_frame_s"] > 0
+    assert 1 <= worker["frames_at_kill"] < 8
+    assert not (tmp_path / "capture_work").exists()
+
+
+@pytest.mark.slow
+def test_solver_bench(tmp_path: Path) -> None:
+    data = run_bench("bench.solver", tmp_path)
+    (run,) = data["runs"]
+    opt, cmp = run["optimise"], run["compare"]
+    assert run["vertices"] == 800 and opt["vertices"] == 800
+    assert opt["iterations"] > 0 and math.isfinite(opt["final_cost"])
+    assert opt["peak_rss_mb"] > 0
+    ours = cmp["ours"]
+    assert ours["final_cost"] < ours["start_cost"]
+    if cmp["scipy"] is not None:  # killed when one scipy iteration outlasts the budget
+        assert cmp["scipy"]["start_cost"] == pytest.approx(ours["start_cost"])
+        assert cmp["scipy"]["jacobian_nnz"] > 0
+
+
+@pytest.mark.slow
+def test_paper_sim_bench(tmp_path: Path) -> None:
+    data = run_bench("bench.paper_sim", tmp_path)
+    blob = data["runs"]["blob"]
+    for mode in ("joint", "baseline", "oracle"):
+        r = blob[mode]
+        assert 0 <= r["rmse_median"] and math.isfinite(r["rmse_mean"])
+        assert r["observed_vertices"] > 0
+        assert (tmp_path / f"paper_sim_blob_{mode}_spectral_error_map.png").is_file()
+    assert blob["joint"]["light_position_error_m"] is not None
+    # the oracle knows shape, light and shadows: its typical vertex beats the 2-D baseline's
+    assert blob["oracle"]["rmse_median"] < blob["baseline"]["rmse_median"]
+    assert blob["oracle"]["accuracy_m"] < 1e-9 < blob["baseline"]["accuracy_m"]
+    assert (tmp_path / "paper_sim_blob_baseline_accuracy_error_map.png").is_file()
