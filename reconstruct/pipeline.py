@@ -2,7 +2,10 @@
 visibility → subdivide), the joint optimisation, and the files of ``SESSION/recon/``.
 
 Config (YAML, all optional): the front's sections ``decode``, ``poses``, ``mesh``,
-``visibility``, ``subdivide`` and ``optimise`` (:class:`OptimiseSettings`, with ``solver``).
+``procam``, ``visibility``, ``subdivide`` and ``optimise`` (:class:`OptimiseSettings`, with
+``solver``). On projector sessions the front recovers one light position per view; the
+optimiser then starts from them and, unless ``optimise.light_mode`` says otherwise, keeps them
+fixed (``fixed``) as the paper does.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ from reconstruct.session import RECON_DIR, Session
 from reconstruct.stages import record_timing
 
 log = logging.getLogger("reconstruct")
-FRONT_SECTIONS = ("decode", "poses", "mesh", "visibility", "subdivide")
+FRONT_SECTIONS = ("decode", "poses", "mesh", "procam", "visibility", "subdivide")
 Progress = Callable[[str, IterationRecord], None]
 
 
@@ -248,6 +251,20 @@ def export_result(
     return figures, report, mesh_path, npz, report_path
 
 
+def projector_lights(
+    front: FrontResult, settings: OptimiseSettings, explicit_mode: bool
+) -> np.ndarray | None:
+    """The initial light positions on projector sessions (None otherwise); without an explicit
+    ``optimise.light_mode`` the settings switch to ``fixed`` lights at those positions."""
+    if front.light_mode_hint != "free" or front.initial_light_positions is None:
+        return None
+    if not explicit_mode:
+        settings.light_mode = "fixed"
+    if settings.light_mode == "offset":
+        return None
+    return np.asarray(front.initial_light_positions, dtype=float)
+
+
 def run_reconstruction(
     session_dir: Path,
     config: Mapping[str, Any] | None = None,
@@ -258,7 +275,8 @@ def run_reconstruction(
     """Both halves of the pipeline on a session; outputs in ``SESSION/recon/``."""
     session_dir = Path(session_dir)
     conf = dict(config or {})
-    settings = OptimiseSettings.from_mapping(conf.pop("optimise", None), "config optimise")
+    opt_conf = conf.pop("optimise", None)
+    settings = OptimiseSettings.from_mapping(opt_conf, "config optimise")
     session = Session.open(session_dir)
     t0 = time.perf_counter()
     front = run_front(
@@ -267,6 +285,7 @@ def run_reconstruction(
     t_front = time.perf_counter() - t0
     t0 = time.perf_counter()
     inp = optimiser_input(front, session, basis or default_basis())
+    inp.initial_light = projector_lights(front, settings, "light_mode" in (opt_conf or {}))
     t_load = time.perf_counter() - t0
     recon = session_dir / RECON_DIR
     t0 = time.perf_counter()

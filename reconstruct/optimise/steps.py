@@ -10,7 +10,7 @@ import logging
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -27,6 +27,10 @@ from reconstruct.optimise.weights import edge_scale, photometric_weights
 from reconstruct.raycast import RayCaster
 
 log = logging.getLogger(__name__)
+# "offset": one shared camera-plate offset (bulb); "free": one position per view (projector);
+# "fixed": one position per view held at the initial positions (the paper fixes the projector
+# poses; free lights drift because the light distance trades against the reflectance scale).
+SettingsLightMode = Literal["offset", "free", "fixed"]
 
 
 @dataclass
@@ -38,7 +42,7 @@ class OptimiseSettings:
     # implementation: in 0..1 linear units the paper's γ over-regularise by 255² (the light
     # distance then trades against the reflectance scale; light z off by centimetres).
     rendering_scale: float = 255.0
-    light_mode: LightMode = "offset"
+    light_mode: SettingsLightMode = "offset"
     robust: Robust = "none"
     robust_scale: float = 0.02  # linear image units: RGB error where the robust loss bends
     outer_iterations: int = 3
@@ -49,6 +53,13 @@ class OptimiseSettings:
     # in the paper. Shading and the geometric term are blind to tangential motion, so free
     # vertices drift in textureless regions and can fold into spikes that cast false shadows.
     position_motion: str = "normal"
+    # Runaway guard: per joint stage a vertex moves at most ``max_step_edges`` of its local mean
+    # edge length, and at most ``max_total_edges`` (initial mesh's edges) from the initial mesh;
+    # vertices seen (at non-grazing angles) from fewer than ``min_views`` views keep their
+    # positions. One or two corrupted views otherwise pull silhouette vertices into spikes.
+    max_step_edges: float = 0.5
+    max_total_edges: float = 2.0
+    min_views: int = 2
     settle_position: float = 0.02  # stop when no vertex moved more than this × mean edge length
     settle_light_m: float = 1e-4
     sigma_chroma: float = 0.03
@@ -90,6 +101,10 @@ class OptimiseSettings:
         if out.position_motion not in ("normal", "free"):
             raise RigError(
                 f"{where}: position_motion {out.position_motion!r} is unknown", "use normal or free"
+            )
+        if out.light_mode not in ("offset", "free", "fixed"):
+            raise RigError(
+                f"{where}: light_mode {out.light_mode!r} is unknown", "use offset, free or fixed"
             )
         if out.robust not in ("none", "huber", "cauchy"):
             raise RigError(
@@ -136,9 +151,15 @@ class OptimiseResult:
 Progress = Callable[[str, IterationRecord], None]
 
 
-def light_positions(rig: Rig, mode: LightMode, light: np.ndarray) -> np.ndarray:
+def problem_mode(mode: SettingsLightMode) -> LightMode:
+    """How a solve parameterises the light: fixed lights are per-view positions kept out of
+    the optimised set."""
+    return "offset" if mode == "offset" else "free"
+
+
+def light_positions(rig: Rig, mode: SettingsLightMode, light: np.ndarray) -> np.ndarray:
     light = np.asarray(light, dtype=float).reshape(-1, 3)
-    if mode == "free":
+    if mode != "offset":
         return light
     return np.stack([pose.light_position(light[0]) for pose in rig.poses])
 
@@ -209,7 +230,30 @@ def build_problem(
         cfg.sigma_intensity,
     )
     weights = Weights(cfg.gamma, e, w, edge_scale(X, adj), cfg.rendering_scale)
-    return Problem(inp.faces, n, inp.basis.B, inp.rig, fr, obs, weights, cfg.light_mode)
+    return Problem(
+        inp.faces, n, inp.basis.B, inp.rig, fr, obs, weights, problem_mode(cfg.light_mode)
+    )
+
+
+def limit_motion(
+    X: np.ndarray,
+    X_prev: np.ndarray,
+    X0: np.ndarray,
+    scale_prev: np.ndarray,
+    scale0: np.ndarray,
+    cfg: OptimiseSettings,
+) -> np.ndarray:
+    """Project each vertex back into its trust regions: a ball of ``max_step_edges`` local edge
+    lengths around its stage start, then one of ``max_total_edges`` around the initial mesh."""
+
+    def clamp(x: np.ndarray, centre: np.ndarray, radius: np.ndarray) -> np.ndarray:
+        d = x - centre
+        norm = np.linalg.norm(d, axis=1)
+        factor = np.minimum(1.0, radius / np.maximum(norm, 1e-300))
+        return centre + d * factor[:, None]
+
+    X = clamp(X, X_prev, cfg.max_step_edges * scale_prev)
+    return clamp(X, X0, cfg.max_total_edges * scale0)
 
 
 def initial_reflectance(
@@ -258,6 +302,11 @@ def optimise(
         light = np.asarray(inp.initial_light, dtype=float).reshape(-1, 3)
     elif cfg.light_mode == "offset":
         light = np.zeros((1, 3))  # paper: v starts at the camera centre
+    elif cfg.light_mode == "fixed":
+        raise RigError(
+            "light mode `fixed` needs known light positions (one per view)",
+            "use it on projector sessions (recon/procam/ lights) or set optimise.light_mode",
+        )
     else:
         light = np.stack([pose.center for pose in inp.rig.poses])
     if light.shape != ((1, 3) if cfg.light_mode == "offset" else (n_views, 3)):
@@ -335,7 +384,12 @@ def optimise(
         A0 = initial_reflectance(problem, theta, inp.basis, cfg.init_smoothness)
         theta = problem.pack(X, A0, light)
     seconds["setup"] = time.perf_counter() - t0
-    theta = run("light", 0, problem, theta, problem.mask(False, True, True), cfg.light_iterations)
+    free_light = cfg.light_mode != "fixed"
+    X0 = X.copy()
+    scale0 = edge_scale(X0, adjacency(inp.faces, len(X0)))
+    theta = run(
+        "light", 0, problem, theta, problem.mask(False, True, free_light), cfg.light_iterations
+    )
     for outer in range(1, cfg.outer_iterations + 1 if cfg.optimise_positions else 1):
         t0 = time.perf_counter()
         X_prev, _, light_prev = problem.unpack(theta)
@@ -343,14 +397,18 @@ def optimise(
         problem = build_problem(inp, X_prev, light_prev, cfg)
         seconds["shadows"] = seconds.get("shadows", 0.0) + time.perf_counter() - t0
         # Vertices no view observes have no data term: only the geometric term (blind to
-        # tangential motion) would move them, so they keep their positions.
-        mask = problem.mask(True, True, True)
-        mask[problem.slices()[0]] = np.repeat(problem.obs.per_vertex > 0, 3)
+        # tangential motion) would move them, so they keep their positions; so do vertices
+        # seen from too few views (no parallax, one bad view decides).
+        o = problem.obs
+        views = np.bincount(o.vertex[o.pair_start], minlength=problem.n_vertices)
+        mask = problem.mask(True, True, free_light)
+        mask[problem.slices()[0]] = np.repeat(views >= max(cfg.min_views, 1), 3)
         directions = None
         if cfg.position_motion == "normal":
             directions, _ = vertex_normals(X_prev, problem.faces)
         theta = run("joint", outer, problem, theta, mask, cfg.joint_iterations, directions)
         X_new, _, light_new = problem.unpack(theta)
+        X_new[:] = limit_motion(X_new, X_prev, X0, problem.weights.scale, scale0, cfg)
         moved = float(np.max(np.linalg.norm(X_new - X_prev, axis=1)))
         light_moved = float(np.max(np.linalg.norm(light_new - light_prev, axis=1)))
         tol = cfg.settle_position * float(np.mean(problem.weights.scale))

@@ -30,7 +30,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--config",
         type=Path,
         default=None,
-        help="YAML with sections decode, poses, mesh, visibility, subdivide, optimise",
+        help="YAML with sections decode, poses, mesh, procam, visibility, subdivide, optimise",
     )
     parser.set_defaults(func=handle)
 
