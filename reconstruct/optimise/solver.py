@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+from threadpoolctl import threadpool_limits
 
 from reconstruct.optimise.cost import JointCost, Linearisation
 
@@ -150,6 +151,24 @@ def levenberg_marquardt(
     settings: SolverSettings | None = None,
     callback: Callback | None = None,
     directions: np.ndarray | None = None,
+) -> SolveResult:
+    """:func:`_levenberg_marquardt` with BLAS held to one thread.
+
+    The CG loop is made of short dot products and vectorised gathers where OpenBLAS's thread
+    hand-off costs more than it gains: on 2 cores a solve took 81.6 s with two BLAS threads
+    and 21.3 s with one (bench/solver.py, --blas-threads).
+    """
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _levenberg_marquardt(cost, theta, mask, settings, callback, directions)
+
+
+def _levenberg_marquardt(
+    cost: JointCost,
+    theta: np.ndarray,
+    mask: np.ndarray,
+    settings: SolverSettings | None,
+    callback: Callback | None,
+    directions: np.ndarray | None,
 ) -> SolveResult:
     """Minimise the joint cost over the parameters where ``mask`` is True.
 
