@@ -5,6 +5,10 @@ from OpenMVS or Metashape run on the same images with the same poses). Without o
 silhouettes of the decoded frames are carved into a visual hull whose oriented boundary
 points go through Poisson reconstruction (``pycolmap.poisson_meshing``, CPU). Outputs in
 ``recon/mesh/``: ``initial.ply``, ``initial.json`` and the silhouettes in ``masks/``.
+
+With ``mesh.board`` (the printed board the object stands on, poses in its frame) silhouettes
+compare each view with the known print instead of a dark background, the hull is carved
+above the board only (z > ``floor_margin_m``) and nothing of the mesh reaches below it.
 """
 
 from __future__ import annotations
@@ -24,7 +28,10 @@ import trimesh
 
 from calibration.errors import RigError
 from reconstruct import poses as poses_stage
+from reconstruct.board import BoardSpec
+from reconstruct.camera import Intrinsics, Pose
 from reconstruct.decode import INDEX, DecodeIndex, load_frame
+from reconstruct.dense.board_silhouette import board_silhouette
 from reconstruct.dense.poisson import poisson_mesh, read_mesh
 from reconstruct.dense.silhouette import silhouette
 from reconstruct.dense.stereo import StereoConfig, hull_stereo_points
@@ -46,13 +53,22 @@ class MeshConfig:
     of poorly posed views); ``carve_votes``: how many views must see a voxel as background
     to carve it (2 forgives a shadow touching one view's outline); ``method``:
     ``visual_hull`` alone, or ``hull_stereo`` which adds hull-guided NCC plane-sweep stereo
-    for what silhouettes miss (concavities)."""
+    for what silhouettes miss (concavities); ``board``: the printed board under the object
+    (a ``BoardSpec`` or its profile mapping; poses must be in the board's frame), whose
+    print replaces the dark background; ``floor_margin_m``: the hull is carved above this
+    height over the board."""
 
     def __post_init__(self) -> None:
         if self.method not in ("hull_stereo", "visual_hull"):
             raise RigError(
                 f"mesh.method {self.method!r} is unknown", "use hull_stereo or visual_hull"
             )
+        self.board_spec()  # a malformed board fails here, naming the key
+
+    def board_spec(self) -> BoardSpec | None:
+        if self.board is None or isinstance(self.board, BoardSpec):
+            return self.board
+        return BoardSpec.from_dict(dict(self.board), source="mesh.board")
 
     method: str = "hull_stereo"  # or "visual_hull"
     voxels: int = 96
@@ -62,6 +78,8 @@ class MeshConfig:
     min_views: int = 3
     num_threads: int = 1  # Poisson's OpenMP threads; more only pay on an idle many-core host
     stereo: StereoConfig = field(default_factory=StereoConfig)
+    board: BoardSpec | Mapping[str, Any] | None = None
+    floor_margin_m: float = 0.001
 
 
 def mesh_config(data: Mapping[str, Any]) -> MeshConfig:
@@ -69,6 +87,8 @@ def mesh_config(data: Mapping[str, Any]) -> MeshConfig:
     values = dict(data)
     if isinstance(values.get("stereo"), Mapping):
         values["stereo"] = StereoConfig(**values["stereo"])
+    if isinstance(values.get("board"), BoardSpec):
+        values["board"] = values["board"].to_dict()
     return MeshConfig(**values)
 
 
@@ -90,10 +110,17 @@ def load_user_mesh(path: Path) -> trimesh.Trimesh:
 
 
 def view_masks(
-    decoded_dir: Path, views: list[int], dilate_px: int
+    decoded_dir: Path,
+    views: list[int],
+    dilate_px: int,
+    board: BoardSpec | None = None,
+    intrinsics: Mapping[int, Intrinsics] | None = None,
+    poses: Mapping[int, Pose] | None = None,
 ) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
     """Silhouette and stereo image (grey, brightest frame) of each view, one view's frames in
-    memory at a time. Views whose silhouette is implausible are left out."""
+    memory at a time: against the known print of ``board`` (then ``intrinsics`` and
+    ``poses`` are needed) or a dark background. Views whose silhouette is implausible are
+    left out."""
     index = DecodeIndex.load(decoded_dir)
     by_view = defaultdict(list)
     for frame in index.frames:
@@ -103,7 +130,17 @@ def view_masks(
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * dilate_px + 1,) * 2)
     for view, frames in sorted(by_view.items()):
         images = [load_frame(decoded_dir, f)[0] for f in frames]
-        mask = silhouette(images)
+        if board is None or intrinsics is None or poses is None:
+            mask = silhouette(images)
+        else:
+            intr = intrinsics[view]
+            if images[0].shape[:2] != (intr.height, intr.width):
+                raise RigError(
+                    f"view {view}: decoded frames are {images[0].shape[1]}x"
+                    f"{images[0].shape[0]} px but its camera is {intr.width}x{intr.height}",
+                    "re-run the poses stage on the same decoded frames",
+                )
+            mask = board_silhouette(images, board, intr, poses[view])
         fraction = float(mask.mean())
         if not 1e-4 < fraction < 0.95:
             log.warning("view %d: silhouette covers %.1f%% of the image, not used", view,
@@ -118,31 +155,41 @@ def dense_mesh(
     decoded_dir: Path, poses_dir: Path, conf: MeshConfig, out_dir: Path
 ) -> tuple[trimesh.Trimesh, dict[str, Any]]:
     intrinsics, poses, _ = poses_stage.load(poses_dir)
-    masks, grey = view_masks(decoded_dir, sorted(poses), conf.mask_dilate_px)
+    board = conf.board_spec()
+    masks, grey = view_masks(
+        decoded_dir, sorted(poses), conf.mask_dilate_px, board, intrinsics, poses
+    )
+    floor = None if board is None else conf.floor_margin_m
     if len(masks) < conf.min_views:
         raise RigError(
             f"only {len(masks)} views have a usable silhouette; the visual hull needs "
             f"{conf.min_views}",
-            "photograph the object against a dark background, or give --initial-mesh",
+            "keep the whole object on the board in view" if board is not None
+            else "photograph the object against a dark background, or give --initial-mesh",
         )
     (out_dir / "masks").mkdir(exist_ok=True)
     for view, mask in masks.items():
         cv2.imwrite(str(out_dir / "masks" / f"view_{view:04d}.png"), mask.astype(np.uint8) * 255)
     sparse = np.load(poses_dir / poses_stage.POINTS)
     points, normals, voxel = visual_hull_points(
-        masks, intrinsics, poses, sparse, conf.voxels, conf.carve_votes
+        masks, intrinsics, poses, sparse, conf.voxels, conf.carve_votes, floor
     )
     depth = int(np.ceil(np.log2(conf.voxels)))
     mesh = poisson_mesh(points, normals, depth, conf.poisson_trim, conf.num_threads)
     info: dict[str, Any] = {"method": "visual_hull+poisson", "views": len(masks), "voxel": voxel,
-                            "hull_points": len(points), "poisson_depth": depth}
+                            "hull_points": len(points), "poisson_depth": depth,
+                            "silhouettes": "dark_background" if board is None else "board"}
     if conf.method == "hull_stereo":
         mesh.export(out_dir / "visual_hull.ply")
         points, normals, stats = hull_stereo_points(
-            mesh, points, normals, grey, masks, intrinsics, poses, voxel, conf.stereo
+            mesh, points, normals, grey, masks, intrinsics, poses, voxel, conf.stereo, floor
         )
         mesh = poisson_mesh(points, normals, depth, conf.poisson_trim, conf.num_threads)
         info |= stats | {"method": "visual_hull+plane_sweep_ncc+poisson"}
+    if floor is not None:  # the object stands on the board: nothing of it lies below
+        vertices = np.array(mesh.vertices)
+        vertices[:, 2] = np.maximum(vertices[:, 2], 0.0)
+        mesh = trimesh.Trimesh(vertices, mesh.faces, process=False)
     return mesh, info
 
 

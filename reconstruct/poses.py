@@ -1,11 +1,21 @@
-"""Poses stage: known poses from ``SESSION/poses/`` or incremental SfM with pycolmap (CPU).
+"""Poses stage: known poses from ``SESSION/poses/``, a printed ChArUco board under the object,
+or incremental SfM with pycolmap (CPU); board and SfM merged when both are available.
+
+Source (``poses.source``): ``auto`` takes known poses when ``SESSION/poses/images.txt``
+exists, else the board when ``session.yaml`` (or its profile snapshot) has a ``board:`` entry,
+else SfM. The board gives metric poses in its own frame (origin at the board centre, z up), so
+meshes come out upright and in metres; SfM, run beside it by default, adds the views where the
+board is hidden, carried into the board frame by a robust similarity. A failing SfM (a
+texture-poor object) is tolerated when the board posed at least three views; a board that
+posed too few views falls back to SfM in ``auto``.
 
 Output in ``recon/poses/``: a COLMAP text model (image id = view + 1, image name
 ``view_NNNN.png``, intrinsics at the decoded frames' full resolution), ``poses.json`` (source,
-registered/total views, mean reprojection error, whether the scale is metric or relative) and
-``points3D.npy`` (SfM points, for bounding the dense stage; empty for known poses).
+registered/total views, mean reprojection error, whether the scale is metric or relative, and
+per view its pose source and board-corner reprojection error) and ``points3D.npy`` (SfM
+points in the output frame, for bounding the dense stage; empty without SfM).
 
-Metric scale: known poses are taken as metres. SfM poses are scaled when the session's
+Metric scale: known and board poses are in metres. SfM alone poses are scaled when the session's
 ``session.yaml`` (top level or its ``profile`` snapshot) names ``known_distances``: a list of
 ``{views: [a, b], metres: d}``, each the measured distance between the camera centres of two
 views (a tape measure, a turntable radius, a slide rail); the median ratio is applied.
@@ -30,10 +40,22 @@ from typing import Any
 import cv2
 import numpy as np
 import pycolmap
+from rich.progress import track
 
 from calibration.errors import RigError
+from reconstruct.board import (
+    BoardPoseResult,
+    BoardSpec,
+    MergedPoses,
+    board_poses,
+    corner_residuals,
+    detect_board,
+    linear_to_u8,
+    merge_with_sfm,
+)
+from reconstruct.board.poses import rms_of
 from reconstruct.camera import CAMERA_MODELS, Intrinsics, Pose, read_colmap_text, write_colmap_text
-from reconstruct.decode import INDEX, SFM_DIR, DecodeIndex
+from reconstruct.decode import INDEX, SFM_DIR, DecodeIndex, load_frame
 from reconstruct.session import Session, write_bytes_atomically
 from reconstruct.stages import quiet_colmap, run_stage
 
@@ -42,13 +64,21 @@ log = logging.getLogger("reconstruct.poses")
 SUMMARY = "poses.json"
 POINTS = "points3D.npy"
 MIN_VIEWS = 3
+SOURCES = ("auto", "known", "board", "sfm")
 
 
 @dataclass(frozen=True)
 class PosesConfig:
-    """``use_known``: read ``SESSION/poses`` when present; ``matcher``: exhaustive,
-    sequential or auto (exhaustive up to 60 views); ``max_features``: SIFT features per
-    image; ``refine_intrinsics``: let bundle adjustment refine given intrinsics.
+    """``source``: auto | known | board | sfm (see the module docstring); ``use_known``: let
+    ``auto`` read ``SESSION/poses`` when present; ``matcher``: exhaustive, sequential or auto
+    (exhaustive up to 60 views); ``max_features``: SIFT features per image;
+    ``refine_intrinsics``: let bundle adjustment refine given intrinsics.
+
+    Board: ``board_with_sfm`` also runs SfM and merges it in; ``board_min_corners`` /
+    ``board_max_rms_px``: a view gets a board pose with at least this many corners and at most
+    this RMS error; ``board_model``: camera model estimated from the board views when the
+    profile gives no intrinsics; ``board_refine_intrinsics``: free given intrinsics in the
+    board adjustment (None: only when estimated).
 
     The defaults suit the rig: a small object turning under a lamp that moves with the camera,
     so few, strongly changing features. Affine-covariant SIFT with domain-size pooling, guided
@@ -56,6 +86,7 @@ class PosesConfig:
     COLMAP's photo defaults (upright DoG, 100 inliers) split them into fragments.
     """
 
+    source: str = "auto"
     use_known: bool = True
     matcher: str = "auto"
     max_features: int = 8192
@@ -64,8 +95,17 @@ class PosesConfig:
     init_min_inliers: int = 30
     refine_intrinsics: bool = False
     num_threads: int = -1
+    board_with_sfm: bool = True
+    board_min_corners: int = 6
+    board_max_rms_px: float = 3.0
+    board_model: str = "RADIAL"
+    board_refine_intrinsics: bool | None = None
 
     def __post_init__(self) -> None:
+        if self.source not in SOURCES:
+            raise RigError(
+                f"poses.source {self.source!r} is unknown", f"use one of {', '.join(SOURCES)}"
+            )
         if self.matcher not in ("auto", "exhaustive", "sequential"):
             raise RigError(
                 f"poses.matcher {self.matcher!r} is unknown", "use auto, exhaustive or sequential"
@@ -74,7 +114,7 @@ class PosesConfig:
 
 @dataclass
 class PoseSummary:
-    source: str  # "known" or "sfm"
+    source: str  # "known", "board", "board+sfm" or "sfm"
     registered: int
     total: int
     registered_views: list[int]
@@ -84,6 +124,8 @@ class PoseSummary:
     scale_factor: float
     intrinsics_source: str
     extra: dict[str, Any] = field(default_factory=dict)
+    # view (as a string) -> {"source": ..., "reprojection_px": board-corner RMS or None, ...}
+    views: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
 @dataclass
@@ -252,6 +294,12 @@ def metric_scale(info: Mapping[str, Any], centres: Mapping[int, np.ndarray]) -> 
     return float(np.median(ratios)) if ratios else None
 
 
+def session_board(info: Mapping[str, Any]) -> BoardSpec | None:
+    """The ``board:`` entry of session.yaml (or its profile snapshot), None without one."""
+    data = session_value(info, "board")
+    return None if data is None else BoardSpec.from_dict(data, source="session.yaml")
+
+
 def _known(
     session: Session, decoded: DecodeIndex
 ) -> tuple[dict[int, tuple[Intrinsics, Pose]], PoseSummary]:
@@ -269,25 +317,36 @@ def _known(
             )
         out[view] = (cams[cid], pose)
     views = sorted(decoded.sfm_images)
+    posed = sorted(set(out) & set(views))
     summary = PoseSummary(
-        "known", len(set(out) & set(views)), len(views), sorted(set(out) & set(views)),
-        sorted(set(views) - set(out)), None, "metric", 1.0, "known poses",
+        "known", len(posed), len(views), posed, sorted(set(views) - set(out)), None, "metric",
+        1.0, "known poses", views={str(v): {"source": "known"} for v in posed},
     )
     return out, summary
 
 
+def _full_size(decoded: DecodeIndex, view: int) -> tuple[int, int]:
+    first = next(f for f in decoded.frames if f.view == view)
+    return first.width, first.height
+
+
 def _sfm_poses(
-    session: Session, decoded: DecodeIndex, decoded_dir: Path, conf: PosesConfig, out_dir: Path
+    session: Session,
+    decoded: DecodeIndex,
+    decoded_dir: Path,
+    conf: PosesConfig,
+    out_dir: Path,
+    intrinsics: Intrinsics | None = None,
 ) -> tuple[dict[int, tuple[Intrinsics, Pose]], PoseSummary, np.ndarray]:
+    """SfM poses; ``intrinsics`` (full size) override the session's when given."""
     views = sorted(decoded.sfm_images)
-    first = next(f for f in decoded.frames if f.view == views[0])
-    full = (first.width, first.height)
+    full = _full_size(decoded, views[0])
     names = [decoded.sfm_images[v] for v in views]
     sfm_image = cv2.imread(str(decoded_dir / SFM_DIR / names[0]), cv2.IMREAD_UNCHANGED)
     if sfm_image is None:
         raise RigError(f"{decoded_dir / SFM_DIR / names[0]} cannot be read", "delete recon/decoded")
     h, w = sfm_image.shape[:2]
-    given = session_intrinsics(session.info)
+    given = intrinsics if intrinsics is not None else session_intrinsics(session.info)
     with tempfile.TemporaryDirectory(dir=out_dir) as tmp:
         result = run_sfm(
             decoded_dir / SFM_DIR, names, conf, Path(tmp),
@@ -305,23 +364,217 @@ def _sfm_poses(
     summary = PoseSummary(
         "sfm", len(out), len(views), sorted(out), sorted(set(views) - set(out)),
         result.mean_reprojection_error_px, "metric" if scale else "relative", scale or 1.0,
-        "session" if given is not None else "sfm",
+        "given" if intrinsics is not None else "session" if given is not None else "sfm",
+        views={str(v): {"source": "sfm"} for v in sorted(out)},
     )
     return out, summary, points
 
 
+def board_images(decoded: DecodeIndex, decoded_dir: Path) -> dict[int, np.ndarray]:
+    """8-bit RGB image of each view at full resolution for corner detection: the SfM copy
+    when it is full size (the view's brightest frame), else the brightest linear frame."""
+    out: dict[int, np.ndarray] = {}
+    for view, name in sorted(decoded.sfm_images.items()):
+        width, height = _full_size(decoded, view)
+        png = cv2.imread(str(decoded_dir / SFM_DIR / name), cv2.IMREAD_COLOR)
+        if png is not None and png.shape[:2] == (height, width):
+            out[view] = np.ascontiguousarray(png[:, :, ::-1])
+            continue
+        frames = [load_frame(decoded_dir, f)[0] for f in decoded.frames if f.view == view]
+        out[view] = linear_to_u8(max(frames, key=lambda img: float(np.mean(img))))
+    return out
+
+
+def _board(
+    session: Session, decoded: DecodeIndex, decoded_dir: Path, conf: PosesConfig, spec: BoardSpec
+) -> BoardPoseResult[int]:
+    images = board_images(decoded, decoded_dir)
+    detections = {
+        v: detect_board(img, spec)
+        for v, img in track(images.items(), description="finding the board", transient=True)
+    }
+    size = _full_size(decoded, min(images))
+    given = session_intrinsics(session.info)
+    result = board_poses(
+        detections, rescale(given, *size) if given is not None else None, size,
+        min_corners=conf.board_min_corners, model=conf.board_model,
+        refine_intrinsics=conf.board_refine_intrinsics, max_rms_px=conf.board_max_rms_px,
+    )
+    for view, why in sorted(result.rejected.items()):
+        log.info("view %d: no board pose (%s)", view, why)
+    log.info(
+        "board: %d/%d views posed, RMS corner error %.3f px, intrinsics %s",
+        len(result.poses), len(images), result.rms_px, result.intrinsics_source,
+    )
+    return result
+
+
+def board_frame_check(
+    decoded: DecodeIndex,
+    decoded_dir: Path,
+    spec: BoardSpec,
+    cameras: Mapping[int, tuple[Intrinsics, Pose]],
+    max_rms_px: float,
+) -> tuple[bool, dict[int, float]]:
+    """Whether given poses are in the board's frame (the board's corners reproject within
+    ``max_rms_px``, median over the views that see at least 6), and each view's RMS."""
+    errors: dict[int, float] = {}
+    for view, image in board_images(decoded, decoded_dir).items():
+        if view not in cameras:
+            continue
+        det = detect_board(image, spec)
+        if det.n_corners >= 6:
+            intr, pose = cameras[view]
+            full = rescale(intr, image.shape[1], image.shape[0])
+            errors[view] = rms_of(corner_residuals(full, pose, det))
+    ok = len(errors) >= MIN_VIEWS and float(np.median(list(errors.values()))) <= max_rms_px
+    return ok, errors
+
+
+def _rounded(value: float) -> float | None:
+    return None if not np.isfinite(value) else round(float(value), 4)
+
+
+def _board_summary(
+    board: BoardPoseResult[int],
+    merged: MergedPoses[int] | None,
+    views: list[int],
+    sfm: PoseSummary | None,
+    sfm_error: str | None,
+) -> PoseSummary:
+    """Per view: pose source, board-corner RMS error (of the final pose), corners seen, why the
+    board gave no pose, and (shared views) how far the carried SfM pose is from the board's."""
+    posed = merged.poses if merged is not None else board.poses
+    sources = merged.source if merged is not None else dict.fromkeys(board.poses, "board")
+    errors = merged.reprojection_px if merged is not None else board.reprojection_px
+    per_view: dict[str, dict[str, Any]] = {}
+    for view in views:
+        entry: dict[str, Any] = {
+            "source": sources.get(view, "none"),
+            "reprojection_px": _rounded(errors.get(view, np.nan)),
+            "board_corners": board.n_corners.get(view, 0),
+        }
+        if view in board.rejected:
+            entry["board_rejected"] = board.rejected[view]
+        if merged is not None and view in merged.alignment_residual_m:
+            entry["alignment_residual_mm"] = round(1000 * merged.alignment_residual_m[view], 3)
+            entry["alignment_rotation_deg"] = round(merged.alignment_rotation_deg[view], 4)
+            entry["alignment_outlier"] = view in merged.alignment_outliers
+        per_view[str(view)] = entry
+    extra: dict[str, Any] = {"board_rms_px": _rounded(board.rms_px)}
+    if merged is not None:
+        extra["sfm_to_board"] = merged.summary()["sfm_to_board"]
+    if sfm is not None:
+        extra["sfm_registered"] = sfm.registered
+        extra["sfm_mean_reprojection_error_px"] = sfm.mean_reprojection_error_px
+    if sfm_error is not None:
+        extra["sfm_error"] = sfm_error
+    registered = sorted(set(posed) & set(views))
+    return PoseSummary(
+        "board+sfm" if merged is not None else "board", len(registered), len(views), registered,
+        sorted(set(views) - set(posed)), _rounded(board.rms_px), "metric", 1.0,
+        f"board ({board.intrinsics_source})", extra, per_view,
+    )
+
+
+def _board_poses(
+    session: Session,
+    decoded: DecodeIndex,
+    decoded_dir: Path,
+    conf: PosesConfig,
+    out_dir: Path,
+    spec: BoardSpec,
+) -> tuple[dict[int, tuple[Intrinsics, Pose]], PoseSummary, np.ndarray]:
+    """Board poses, merged with SfM when it runs; SfM alone in ``auto`` if the board fails."""
+    strict = conf.source == "board"
+    views = sorted(decoded.sfm_images)
+    try:
+        board = _board(session, decoded, decoded_dir, conf, spec)
+    except RigError as exc:
+        if strict:
+            raise
+        log.warning("board poses failed (%s); using SfM alone", exc.problem)
+        cameras, summary, points = _sfm_poses(session, decoded, decoded_dir, conf, out_dir)
+        summary.extra["board_error"] = exc.problem
+        return cameras, summary, points
+    sfm: tuple[dict[int, tuple[Intrinsics, Pose]], PoseSummary, np.ndarray] | None = None
+    sfm_error = None
+    if conf.board_with_sfm:
+        try:
+            sfm = _sfm_poses(session, decoded, decoded_dir, conf, out_dir, board.intrinsics)
+        except RigError as exc:
+            sfm_error = exc.problem
+            log.warning("SfM beside the board failed (%s); board poses alone", exc.problem)
+    if len(board.poses) < MIN_VIEWS:
+        if sfm is not None and not strict:
+            log.warning("the board posed only %d views; using SfM alone", len(board.poses))
+            sfm[1].extra["board_error"] = f"the board posed only {len(board.poses)} views"
+            return sfm
+        raise RigError(
+            f"the board posed only {len(board.poses)} of {len(views)} views of {session.root}"
+            f" (need {MIN_VIEWS}){'' if sfm_error is None else f'; SfM failed: {sfm_error}'}",
+            "capture views that see the board (at least 6 corners each), check the profile's "
+            "board entry matches the print, or use poses.source: sfm",
+        )
+    merged: MergedPoses[int] | None = None
+    points = np.zeros((0, 3))
+    if sfm is not None:
+        try:
+            merged = merge_with_sfm(board, {v: p for v, (_, p) in sfm[0].items()})
+            points = merged.similarity.apply(sfm[2])
+        except RigError as exc:
+            sfm_error = exc.problem
+            log.warning("SfM not merged with the board (%s); board poses alone", exc.problem)
+    posed = merged.poses if merged is not None else board.poses
+    cameras = {
+        v: (board.intrinsics if v in board.poses or sfm is None else sfm[0][v][0], pose)
+        for v, pose in posed.items()
+    }
+    summary = _board_summary(
+        board, merged, views, None if sfm is None else sfm[1], sfm_error
+    )
+    return cameras, summary, points
+
+
 def _poses(session: Session, decoded_dir: Path, conf: PosesConfig, out_dir: Path) -> None:
     decoded = DecodeIndex.load(decoded_dir)
-    known = conf.use_known and (session.poses_dir / "images.txt").is_file()
-    if known:
+    has_known = (session.poses_dir / "images.txt").is_file()
+    spec = session_board(session.info)
+    source = conf.source
+    if source == "auto":
+        source = "known" if conf.use_known and has_known else "board" if spec else "sfm"
+    if source == "known":
+        if not has_known:
+            raise RigError(
+                f"poses.source is known but {session.poses_dir / 'images.txt'} does not exist",
+                "put a COLMAP text model in SESSION/poses/, or use poses.source: auto",
+            )
         cameras, summary = _known(session, decoded)
         points = np.zeros((0, 3))
+        if spec is not None:  # e.g. the sim's true poses: then the board frame is the world's
+            in_frame, errors = board_frame_check(
+                decoded, decoded_dir, spec, cameras, conf.board_max_rms_px
+            )
+            summary.extra["board_frame"] = in_frame
+            for view, error in errors.items():
+                if str(view) in summary.views:
+                    summary.views[str(view)]["reprojection_px"] = _rounded(error)
+    elif source == "board":
+        if spec is None:
+            raise RigError(
+                f"poses.source is board but {session.root / 'session.yaml'} has no board entry",
+                "add the board: snippet printed by `rig board` to the profile before capture, "
+                "or use poses.source: sfm",
+            )
+        cameras, summary, points = _board_poses(
+            session, decoded, decoded_dir, conf, out_dir, spec
+        )
     else:
         cameras, summary, points = _sfm_poses(session, decoded, decoded_dir, conf, out_dir)
     if summary.registered < MIN_VIEWS:
         raise RigError(
             f"only {summary.registered} of {summary.total} views of {session.root} have a pose "
-            f"({'known' if known else 'SfM'}); at least {MIN_VIEWS} are needed",
+            f"({summary.source}); at least {MIN_VIEWS} are needed",
             "capture more overlapping, textured views, or give poses in SESSION/poses/ "
             "(COLMAP text model)",
         )
@@ -355,7 +608,7 @@ def load(out_dir: Path) -> tuple[dict[int, Intrinsics], dict[int, Pose], PoseSum
 def run(
     conf: PosesConfig | Mapping[str, Any], session_dir: Path, decoded_dir: Path, out_dir: Path
 ) -> Path:
-    """Poses of every view (known or SfM) into ``out_dir`` (resumable)."""
+    """Poses of every view (known, board, SfM or board + SfM) into ``out_dir`` (resumable)."""
     conf = conf if isinstance(conf, PosesConfig) else PosesConfig(**conf)
     session = Session.open(session_dir)
     inputs = [session_dir / "session.yaml", decoded_dir / INDEX, session.poses_dir]

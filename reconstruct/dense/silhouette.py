@@ -15,19 +15,30 @@ import numpy as np
 
 def silhouette(images: list[np.ndarray], open_px: int = 2) -> np.ndarray:
     """Linear RGB images of one view -> bool foreground mask (H, W)."""
-    brightness = np.max([img.sum(axis=2) for img in images], axis=0)
-    top = float(np.percentile(brightness, 99.9)) or 1.0
-    u8 = (np.clip(brightness / top, 0.0, 1.0) ** (1.0 / 2.2) * 255.0).astype(np.uint8)
-    otsu, _ = cv2.threshold(u8, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
-    # Otsu splits object from background halfway and loses the object's dark limb (lit at
-    # grazing angles); the background's own spread is the better limit
-    background = u8[u8 <= otsu].astype(float)
-    level = min(otsu, background.mean() + 4.0 * background.std() + 1.0)
-    mask = (u8 > level).astype(np.uint8) * 255
+    u8 = tone_map(np.max([img.sum(axis=2) for img in images], axis=0))
+    mask: np.ndarray = np.where(u8 > dark_level(u8), 255, 0).astype(np.uint8)
     if open_px:
         kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * open_px + 1,) * 2)
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
     return fill_holes(mask > 0)
+
+
+def tone_map(brightness: np.ndarray) -> np.ndarray:
+    """Linear brightness -> uint8 on a gamma curve (the 99.9th percentile white), so the
+    dark background's noise and the object's range both get levels."""
+    top = float(np.percentile(brightness, 99.9)) or 1.0
+    return (np.clip(brightness / top, 0.0, 1.0) ** (1.0 / 2.2) * 255.0).astype(np.uint8)
+
+
+def dark_level(u8: np.ndarray) -> float:
+    """Threshold above which a tone-mapped pixel is object rather than dark background.
+
+    Otsu splits object from background halfway and loses the object's dark limb (lit at
+    grazing angles); the background's own spread is the better limit."""
+    values = np.ascontiguousarray(u8.reshape(-1, 1))
+    otsu, _ = cv2.threshold(values, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    background = values[values <= otsu].astype(float)
+    return float(min(otsu, background.mean() + 4.0 * background.std() + 1.0))
 
 
 def fill_holes(mask: np.ndarray) -> np.ndarray:

@@ -228,8 +228,11 @@ def hull_stereo_points(
     poses: dict[int, Pose],
     voxel: float,
     conf: StereoConfig,
+    floor: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
-    """Oriented points: consistent stereo points plus the hull points stereo does not refute."""
+    """Oriented points: consistent stereo points plus the hull points stereo does not refute.
+    With a ``floor`` (board at z = 0) stereo points on or under the board are dropped: the
+    masks include the object's shadow, where the sweep finds the board itself."""
     caster = RayCaster(hull_mesh.vertices, hull_mesh.faces)
     span = conf.depth_range * float(np.ptp(hull_mesh.vertices, axis=0).max())
     posed = {v: poses[v] for v in masks}
@@ -245,6 +248,9 @@ def hull_stereo_points(
     ok = {v: votes[v] >= conf.min_consistent for v in views}
     sp = np.concatenate([maps[v].points[ok[v]] for v in views])
     sn = np.concatenate([maps[v].normals[ok[v]] for v in views])
+    if floor is not None:
+        above = sp[:, 2] > floor + voxel / 2
+        sp, sn = sp[above], sn[above]
     # a hull point goes when one other view backs the deeper surface: dropping is cheap to
     # undo (Poisson closes small gaps), keeping a bridged concavity is not
     confirmed = {v: maps[v].confirmed(votes[v] >= 1) for v in views}

@@ -1,9 +1,9 @@
 """Visual hull by voxel carving, as oriented surface points for Poisson meshing.
 
-A CPU-only dense path that needs no texture: the rig's object sits on a dark background,
-so silhouettes are reliable even when the object is uniformly coloured (where stereo
-matching has nothing to match). It misses concavities that no silhouette reveals; the
-joint optimisation refines the shape from shading afterwards.
+A CPU-only dense path that needs no texture: the rig's object sits on a dark background
+(or a printed board of known pose), so silhouettes are reliable even when the object is
+uniformly coloured (where stereo matching has nothing to match). It misses concavities
+that no silhouette reveals; the joint optimisation refines the shape from shading afterwards.
 """
 
 from __future__ import annotations
@@ -48,6 +48,7 @@ def carve(
     resolution: int,
     min_views: int = 3,
     votes: int = 2,
+    floor: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Occupancy grid over [lo, hi] with ``resolution`` voxels on the longest side.
 
@@ -55,6 +56,7 @@ def carve(
     the image) put it outside their silhouette, and at least ``min_views`` views see it.
     ``votes=1`` is the classic hull; 2 forgives one view's silhouette error (a shadow
     touching the outline reads as background), at the price of a slightly looser hull.
+    With a ``floor`` (an object standing on a board at z = 0) only voxels above it count.
     Returns (occupancy (nx, ny, nz) bool, origin (voxel 0 centre), voxel size).
     """
     size = float((hi - lo).max()) / resolution
@@ -73,6 +75,8 @@ def carve(
         outside += ok & ~hit
         seen += ok
     occupied = (outside < votes) & (seen >= min_views)
+    if floor is not None:
+        occupied &= grid[:, 2] > floor
     return occupied.reshape(shape), lo + 0.5 * size, size
 
 
@@ -107,20 +111,28 @@ def visual_hull_points(
     sparse: np.ndarray | None,
     resolution: int,
     votes: int = 2,
+    floor: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Coarse carve to find the object, a finer carve in a tight box; oriented points."""
+    """Coarse carve to find the object, a finer carve in a tight box; oriented points.
+    With a ``floor`` (board at z = 0) sparse points on the board are no part of the object."""
+    if floor is not None and sparse is not None:
+        sparse = sparse[sparse[:, 2] > floor]
     lo, hi = scene_box(intrinsics, poses, sparse)
-    occ, origin, size = carve(masks, intrinsics, poses, lo, hi, max(32, resolution // 3), 3, votes)
+    occ, origin, size = carve(
+        masks, intrinsics, poses, lo, hi, max(32, resolution // 3), 3, votes, floor
+    )
     if not occ.any():
         raise RigError(
             "the visual hull is empty: the silhouettes of the views do not agree",
-            "check that the object stands out from a dark background in every view, or give "
-            "--initial-mesh",
+            "check that the object stands out from a dark background (or the board) in every "
+            "view, or give --initial-mesh",
         )
     idx = np.argwhere(occ)
     lo = origin + size * (idx.min(0) - 1.5)
     hi = origin + size * (idx.max(0) + 1.5)
-    occ, origin, size = carve(masks, intrinsics, poses, lo, hi, resolution, 3, votes)
+    if floor is not None:  # nothing below the floor is object: no voxels wasted there
+        lo[2] = max(lo[2], floor - size)
+    occ, origin, size = carve(masks, intrinsics, poses, lo, hi, resolution, 3, votes, floor)
     log.info("visual hull: %d of %d voxels occupied (voxel %.4g)", occ.sum(), occ.size, size)
     points, normals = surface_points(occ, origin, size)
     return points, normals, size

@@ -95,6 +95,7 @@ def test_sim_structure_from_motion(tmp_path: Path) -> None:
     assert summary.mean_reprojection_error_px is not None
     assert summary.mean_reprojection_error_px < 1.5
     assert summary.scale == "relative"
+    assert {entry["source"] for entry in summary.views.values()} == {"sfm"}  # no board here
     # bring the SfM frame onto the truth through the camera centres, then measure
     _, truth_images = read_colmap_text(root / "truth" / "poses")
     true_centres = {iid - 1: pose.center for iid, (_, _, pose) in truth_images.items()}
