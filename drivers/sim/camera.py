@@ -31,6 +31,7 @@ from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID
 from calibration.spectra import resample
 from drivers.protocols import CapturedFrame
+from drivers.sim.config_keys import reject_unknown_keys
 from drivers.sim.dng import write_dng
 from drivers.sim.light import SimLight
 from drivers.sim.projector import SimProjector
@@ -66,13 +67,7 @@ class SensorConfig:
         cls, data: Mapping[str, Any] | None, where: str = "sim.camera"
     ) -> SensorConfig:
         data = dict(data or {})
-        known = {f.name for f in fields(cls)}
-        unknown = set(data) - known
-        if unknown:
-            raise RigError(
-                f"{where}: unknown key(s) {', '.join(sorted(unknown))}",
-                f"use only {', '.join(sorted(known))}",
-            )
+        reject_unknown_keys(data, (f.name for f in fields(cls)), where)
         conf = cls(**data)
         if conf.width % 2 or conf.height % 2 or conf.width < 32 or conf.height < 32:
             raise RigError(

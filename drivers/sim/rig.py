@@ -31,6 +31,7 @@ import yaml
 
 from calibration.errors import RigError
 from drivers.sim.camera import SensorConfig, SimCamera
+from drivers.sim.config_keys import reject_unknown_keys
 from drivers.sim.light import SimLight
 from drivers.sim.projector import SimProjector
 from drivers.sim.scene import SCENES, Scene, make_scene
@@ -81,12 +82,7 @@ class SimRig:
 
     def __init__(self, config: Mapping[str, Any] | None = None, seed: int = 0) -> None:
         conf = dict(config or {})
-        unknown = set(conf) - _KEYS
-        if unknown:
-            raise RigError(
-                f"sim: unknown key(s) {', '.join(sorted(unknown))}",
-                f"use only {', '.join(sorted(_KEYS))}",
-            )
+        reject_unknown_keys(conf, _KEYS, "sim")
         self.seed = int(seed)
         self.scene = _load_scene(conf, self.seed)
         self.ground = _ground(conf.get("ground"), len(self.scene.wavelengths))
@@ -101,12 +97,7 @@ class SimRig:
             traj["light_offset_m"] = conf["light_offset_m"]
         self.trajectory = TrajectoryConfig.from_mapping(traj)
         proj = {**_PROJECTOR_DEFAULTS, **dict(conf.get("projector") or {})}
-        extra = sorted(set(proj) - set(_PROJECTOR_DEFAULTS))
-        if extra:
-            raise RigError(
-                f"sim.projector: unknown key(s) {', '.join(extra)}",
-                f"use only {', '.join(_PROJECTOR_DEFAULTS)}",
-            )
+        reject_unknown_keys(proj, _PROJECTOR_DEFAULTS, "sim.projector")
         self.placements = PlacementConfig.from_mapping(proj, self.trajectory.views)
         if self.placements is None:
             self.poses: list[Pose] = ring_poses(self.trajectory)

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from calibration.errors import RigError
+from drivers.sim.config_keys import reject_unknown_keys
 from reconstruct.camera import Pose
 
 
@@ -37,13 +38,7 @@ class TrajectoryConfig:
     ) -> TrajectoryConfig:
         """Build from a profile section; unknown keys and bad values raise :class:`RigError`."""
         data = dict(data or {})
-        known = {f.name for f in fields(cls)}
-        unknown = set(data) - known
-        if unknown:
-            raise RigError(
-                f"{where}: unknown key(s) {', '.join(sorted(unknown))}",
-                f"use only {', '.join(sorted(known))}",
-            )
+        reject_unknown_keys(data, (f.name for f in fields(cls)), where)
         for key in ("elevations_deg", "target_m", "light_offset_m"):
             if key in data:
                 data[key] = tuple(float(x) for x in data[key])
