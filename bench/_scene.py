@@ -13,17 +13,12 @@ from scipy.spatial import ConvexHull
 
 from calibration.basis import default_basis
 from calibration.defaults import (
-    camera_sensitivity,
     colorchecker_reflectances,
-    default_illuminations,
-    illumination_spd,
-    rgbcw_channel_spds,
 )
 from reconstruct.camera import Intrinsics, Pose
-from reconstruct.forward import response_matrix
 from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.problem import Frames, Rig
-from reconstruct.optimise.synthetic import SyntheticScene
+from reconstruct.optimise.synthetic import SyntheticScene, default_responses
 from reconstruct.raycast import RayCaster
 from reconstruct.render import render_image
 
@@ -98,12 +93,7 @@ def build_scene(
     _, cc = colorchecker_reflectances()
     refl = cc[paint(d, rng)]
     alpha = basis.project(refl)
-    cam = camera_sensitivity()
-    channels = rgbcw_channel_spds()
-    named = default_illuminations()
-    responses = np.stack(
-        [response_matrix(cam, illumination_spd(named[k], channels)) for k in illuminations]
-    )
+    responses = default_responses(illuminations)
     poses = ring_poses(n_views)
     intr = [Intrinsics.pinhole(width, height, 1.6 * width)] * n_views
     v = np.asarray(LIGHT_OFFSET_M, dtype=float)

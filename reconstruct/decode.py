@@ -121,6 +121,24 @@ def load_frame(out_dir: Path, frame: DecodedFrame) -> tuple[np.ndarray, np.ndarr
     return image, np.load(out_dir / frame.saturated)
 
 
+def postprocess_linear(raw: rawpy.RawPy, demosaic: str) -> np.ndarray:
+    """LibRaw's demosaic with nothing else: black subtracted, scaled so white = 65535, no white
+    balance, no colour matrix, gamma 1, and a fixed maximum (``adjust_maximum_thr=0``) so the
+    gain never changes from shot to shot."""
+    return raw.postprocess(
+        demosaic_algorithm=DEMOSAIC[demosaic],
+        use_camera_wb=False,
+        use_auto_wb=False,
+        user_wb=[1.0, 1.0, 1.0, 1.0],
+        output_color=rawpy.ColorSpace.raw,
+        gamma=(1, 1),
+        output_bps=16,
+        no_auto_bright=True,
+        adjust_maximum_thr=0.0,
+        user_flip=0,
+    )
+
+
 def decode_raw(path: Path, demosaic: str, saturation: float) -> tuple[np.ndarray, np.ndarray]:
     """RAW file -> ((raw - black) / (white - black) in camera RGB, saturation mask)."""
     with rawpy.imread(str(path)) as raw:
@@ -128,18 +146,7 @@ def decode_raw(path: Path, demosaic: str, saturation: float) -> tuple[np.ndarray
         blacks = np.asarray(raw.black_level_per_channel, dtype=np.float32)
         black = blacks[raw.raw_colors_visible]
         white = float(raw.white_level)
-        rgb = raw.postprocess(
-            demosaic_algorithm=DEMOSAIC[demosaic],
-            use_camera_wb=False,
-            use_auto_wb=False,
-            user_wb=[1.0, 1.0, 1.0, 1.0],
-            output_color=rawpy.ColorSpace.raw,
-            gamma=(1, 1),
-            output_bps=16,
-            no_auto_bright=True,
-            adjust_maximum_thr=0.0,
-            user_flip=0,
-        )
+        rgb = postprocess_linear(raw, demosaic)
     clipped = (mosaic - black) >= saturation * (white - black)
     # the demosaic reads a neighbourhood: a pixel is unusable if any sample near it clipped
     radius = 1 if demosaic == "linear" else 2
@@ -206,8 +213,12 @@ def sfm_image_name(view: int) -> str:
 
 def _bad(conf: DecodeConfig, bad: dict[str, str]) -> None:
     for name, why in bad.items():
-        log.warning("frame %s is unusable (%s)%s", name, why,
-                    ", skipped" if conf.on_bad_frame == "skip" else "")
+        log.warning(
+            "frame %s is unusable (%s)%s",
+            name,
+            why,
+            ", skipped" if conf.on_bad_frame == "skip" else "",
+        )
     if bad and conf.on_bad_frame == "stop":
         listed = "; ".join(f"{name}: {why}" for name, why in bad.items())
         raise RigError(
@@ -241,9 +252,18 @@ def _decode(session: Session, conf: DecodeConfig, out_dir: Path) -> None:
         np.save(out_dir / f"{stem}_sat.npy", mask)
         frames.append(
             DecodedFrame(
-                record.frame, record.view, record.illumination, f"{stem}.npy", f"{stem}_sat.npy",
-                record.path, record.exposure_s, record.iso, rgb.shape[0], rgb.shape[1],
-                float(mask.mean()), dict(record.extra),
+                record.frame,
+                record.view,
+                record.illumination,
+                f"{stem}.npy",
+                f"{stem}_sat.npy",
+                record.path,
+                record.exposure_s,
+                record.iso,
+                rgb.shape[0],
+                rgb.shape[1],
+                float(mask.mean()),
+                dict(record.extra),
             )
         )
         score = _sfm_score(record.illumination, rgb, conf)

@@ -8,6 +8,7 @@ the capture or front-end stages, so the optimiser can be checked on its own agai
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,6 +58,17 @@ class SyntheticScene:
         )
 
 
+def default_responses(illuminations: Sequence[str]) -> np.ndarray:
+    """(K, 3, N_λ) response matrices of the built-in camera under the built-in bulb's named
+    illuminations — what the synthetic scenes are rendered with."""
+    cam = camera_sensitivity()
+    channels = rgbcw_channel_spds()
+    named = default_illuminations()
+    return np.stack(
+        [response_matrix(cam, illumination_spd(named[k], channels)) for k in illuminations]
+    )
+
+
 def bumpy_sphere(
     subdivisions: int = 3, radius: float = 0.05, bumps: float = 0.06
 ) -> trimesh.Trimesh:
@@ -86,12 +98,7 @@ def make_scene(
     label = (d[:, 0] > 0).astype(int) + 2 * (d[:, 2] > 0.3).astype(int)
     refl = basis.reconstruct(basis.project(patches[label]))
     alpha = basis.project(refl)
-    cam = camera_sensitivity()
-    channels = rgbcw_channel_spds()
-    named = default_illuminations()
-    responses = np.stack(
-        [response_matrix(cam, illumination_spd(named[k], channels)) for k in illuminations]
-    )
+    responses = default_responses(illuminations)
     poses = []
     for k, a in enumerate(np.linspace(0, 2 * np.pi, n_views, endpoint=False)):
         elev = 0.35 * np.sin(3 * a + k)

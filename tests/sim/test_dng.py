@@ -11,6 +11,7 @@ import tifffile
 
 from calibration.errors import RigError
 from drivers.sim.dng import write_dng
+from reconstruct.decode import postprocess_linear
 
 BLACK, WHITE = 512, 16383
 
@@ -33,20 +34,9 @@ def _write(path: Path, mosaic: np.ndarray, pattern: str = "RGGB") -> None:
 
 
 def decode(path: Path) -> np.ndarray:
-    """The decode stage's LibRaw call (docs/usage-sim.md): linear camera RGB, 16-bit."""
+    """The decode stage's own LibRaw call: linear camera RGB, 16-bit."""
     with rawpy.imread(str(path)) as raw:
-        return raw.postprocess(
-            demosaic_algorithm=rawpy.DemosaicAlgorithm.LINEAR,
-            use_camera_wb=False,
-            use_auto_wb=False,
-            user_wb=[1.0, 1.0, 1.0, 1.0],
-            output_color=rawpy.ColorSpace.raw,
-            gamma=(1, 1),
-            output_bps=16,
-            no_auto_bright=True,
-            adjust_maximum_thr=0.0,
-            user_flip=0,
-        )
+        return postprocess_linear(raw, "linear")
 
 
 def test_rawpy_reads_levels_pattern_and_values(tmp_path: Path) -> None:
