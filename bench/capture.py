@@ -1,6 +1,8 @@
 """Capture-rig overhead: a sim capture (views × illuminations) with a zero-latency camera that
 writes a pre-made valid DNG instantly, so only the rig's own work per frame is measured (light
-switching, decode check, fsync, rename, sha256, manifest append, progress); and the resume time
+switching, decode check, fsync, rename, sha256, manifest append, progress, and the board and
+exposure checks; the DNG is a sim render of the object on its board, or with ``--template
+noise`` a noise frame in which no board is ever found); and the resume time
 after a SIGKILL mid-capture (a subprocess capture is killed, ``--resume`` is timed until the
 next frame lands in the manifest), once with the zero-latency camera and once through the real
 ``rig capture`` CLI with the rendering sim camera.
@@ -45,6 +47,25 @@ TARGET_MS = 50.0
 
 
 # --- the zero-latency camera -------------------------------------------------------------
+
+
+def render_template(path: Path, profile: Path, seed: int = 0) -> Path:
+    """The sim camera's DNG of the profile's first view under its first illumination (the
+    object on its board), rendered once and moved to ``path``."""
+    from rig.capture.devices import open_devices
+    from rig.profile import load_profile
+
+    loaded = load_profile(profile)
+    devices = open_devices(loaded, seed, None)
+    try:
+        devices.goto_view(0)
+        assert devices.light is not None
+        devices.light.set_levels(next(iter(loaded.illuminations.values())))
+        frame = devices.camera.capture(path.parent / "render", "template")
+    finally:
+        devices.close()
+    shutil.move(Path(frame.paths[0]), path)
+    return path
 
 
 def make_template(path: Path, width: int, height: int, seed: int = 0) -> Path:
@@ -130,7 +151,8 @@ def write_profile(path: Path, views: int, illuminations: int, width: int, height
     data["sim"] = {
         **dict(data.get("sim") or {}),
         "subdivisions": 4,  # the zero-latency camera never renders; keep the sim setup small
-        "camera": {"width": width, "height": height},
+        # the same field of view at every size (the sim's default: 800 px focal at 640 wide)
+        "camera": {"width": width, "height": height, "focal_px": 800.0 * width / 640},
     }
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
@@ -142,6 +164,8 @@ def write_profile(path: Path, views: int, illuminations: int, width: int, height
 def per_frame_overhead(profile: Path, template: Path, session: Path) -> dict[str, Any]:
     """In-process capture; per-frame time between manifest appends minus the camera's write."""
     from rig.capture import run_capture
+    from rig.capture.board_check import board_binnings
+    from rig.capture.frames import read_raw
 
     camera = ZeroLatencyCamera(template)
     stamps: list[float] = []
@@ -155,6 +179,8 @@ def per_frame_overhead(profile: Path, template: Path, session: Path) -> dict[str
         on_frame=lambda _record: stamps.append(time.perf_counter()),
     )
     total = time.perf_counter() - t0
+    info = yaml.safe_load((session / "session.yaml").read_text())
+    boards = list((info.get("board_checks") or {}).values())
     intervals = np.diff(stamps)  # the first frame's time is the setup, reported apart
     cam = np.asarray(camera.seconds[1:])
     overhead_ms = (intervals - cam[: len(intervals)]) * 1e3
@@ -164,13 +190,19 @@ def per_frame_overhead(profile: Path, template: Path, session: Path) -> dict[str
         "setup_s": stamps[0] - t0,
         "overhead_ms": overhead_ms.tolist(),
         "camera_write_ms_mean": float(np.mean(camera.seconds) * 1e3),
+        "board_checks": [{"corners": b["corners"], "binning": b["binning"]} for b in boards],
+        "board_quick_binning": board_binnings(read_raw(template))[0],
     }
 
 
-def component_times(template: Path, work: Path, repeats: int) -> dict[str, float]:
-    """Median ms of the steps store_frame does per frame, each on its own."""
+def component_times(template: Path, profile: Path, work: Path, repeats: int) -> dict[str, float]:
+    """Median ms of the steps store_frame does per frame, each on its own, and of the checks
+    (board: a view's first lit frame; exposure: each illumination's first frame)."""
     from reconstruct.session import FrameRecord, append_manifest, fsync_dir, sha256_file
-    from rig.capture.frames import read_raw
+    from rig.capture.board_check import look_for_board
+    from rig.capture.engine import BOARD_MIN_CORNERS
+    from rig.capture.frames import check_exposure, read_raw
+    from rig.profile import load_profile
 
     work.mkdir(parents=True, exist_ok=True)
     data = template.read_bytes()
@@ -194,12 +226,17 @@ def component_times(template: Path, work: Path, repeats: int) -> dict[str, float
         target.write_bytes(data)
         fsync_file()
 
+    board = load_profile(profile).board
+    assert board is not None
+    raw = read_raw(target)
     return {
         "decode check (rawpy)": timed(lambda: read_raw(target)),
         "sha256": timed(lambda: sha256_file(target)),
         "write + fsync file": timed(write_fsync),
         "fsync dir": timed(lambda: fsync_dir(work)),
         "manifest append + fsync": timed(lambda: append_manifest(work, record)),
+        "board check, once per view": timed(lambda: look_for_board(raw, board, BOARD_MIN_CORNERS)),
+        "exposure check, once per illumination": timed(lambda: check_exposure(raw, "LED1", 0.8)),
     }
 
 
@@ -331,8 +368,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=20, help="repeats of each component")
     parser.add_argument("--no-cli", action="store_true", help="skip the rig CLI resume test")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--keep", action="store_true", help="keep the session directories")
     parser.add_argument("--quick", action="store_true", help="smoke size (4 views, 2 lights)")
+    parser.add_argument(
+        "--template",
+        choices=("sim", "noise"),
+        default="sim",
+        help="the camera's frame: a sim render of the object on its board, or noise (no board)",
+    )
     args = parser.parse_args(argv)
     if args.quick:
         args.views, args.illuminations, args.repeats = 4, 2, 3
@@ -345,17 +389,22 @@ def main(argv: list[str] | None = None) -> int:
     profile = write_profile(
         work / "profile.yaml", args.views, args.illuminations, args.width, args.height
     )
-    template = make_template(work / "template.dng", args.width, args.height)
+    template = (
+        render_template(work / "template.dng", profile, args.seed)
+        if args.template == "sim"
+        else make_template(work / "template.dng", args.width, args.height, args.seed)
+    )
     total = args.views * args.illuminations
     console.print(f"capture: {args.views} views × {args.illuminations} illuminations = {total}")
 
     run = per_frame_overhead(profile, template, work / "inprocess")
-    parts = component_times(template, work / "components", args.repeats)
+    parts = component_times(template, profile, work / "components", args.repeats)
     ov = np.asarray(run["overhead_ms"])
     size_mb = template.stat().st_size / 1e6
     t1 = ResultTable(
         f"Rig overhead per frame, zero-latency camera ({args.views} views × "
-        f"{args.illuminations} illuminations, {args.width}×{args.height} DNG, {size_mb:.2f} MB)",
+        f"{args.illuminations} illuminations, {args.width}×{args.height} DNG, {size_mb:.2f} MB, "
+        f"{'sim render' if args.template == 'sim' else 'noise, no board'})",
         ["quantity", "value", "target"],
     )
     t1.add("overhead per frame, mean", f"{ov.mean():.1f} ms", f"≤ {TARGET_MS:.0f} ms")
@@ -365,9 +414,19 @@ def main(argv: list[str] | None = None) -> int:
     t1.add("met", bool(ov.mean() <= TARGET_MS), "")
     t1.add("session setup until first frame", f"{run['setup_s']:.2f} s", "")
     t1.add("whole capture", f"{run['total_s']:.2f} s", "")
+    boards = run["board_checks"]
+    quick = sum(b["binning"] == run["board_quick_binning"] for b in boards)
+    t1.add(
+        "board checks: views with ≥ 6 corners; found in the quick look",
+        f"{sum(b['corners'] >= 6 for b in boards)}/{len(boards)}; {quick}/{len(boards)}",
+        "",
+    )
     t1.add("camera write (excluded)", f"{run['camera_write_ms_mean']:.2f} ms", "")
     for name, ms in parts.items():
-        t1.add(f"  of which {name}", f"{ms:.2f} ms", "")
+        if name.startswith(("board check", "exposure check")):
+            t1.add(name, f"{ms:.2f} ms", "")
+        else:
+            t1.add(f"  of which {name}", f"{ms:.2f} ms", "")
 
     t2 = ResultTable(
         "Resume after SIGKILL mid-capture",
@@ -440,7 +499,8 @@ def main(argv: list[str] | None = None) -> int:
     notes = [
         "overhead = time between consecutive manifest appends minus the camera's own file write; "
         "it includes moving the sim plate, switching the sim light, the decode check, fsyncs, "
-        "rename, sha256, the manifest append and the progress bar",
+        "rename, sha256, the manifest append, the progress bar, and the board check (each "
+        "view's first lit frame) and exposure check (each illumination's first frame)",
         "resume → next frame: from launching the resume process (interpreter start and imports "
         "included) until the manifest holds one more frame; the CLI row includes one sim render",
     ]

@@ -26,17 +26,10 @@ from rich.progress import (
 
 from calibration.errors import RigError
 from drivers.protocols import LightSource
-from reconstruct.board import board_visibility_report
 from reconstruct.session import RAW_DIR, FrameRecord
+from rig.capture.board_check import look_for_board
 from rig.capture.devices import Ask, RigDevices, device_errors
-from rig.capture.frames import (
-    INCOMING,
-    ExposureCheck,
-    board_image,
-    check_exposure,
-    read_raw,
-    store_frame,
-)
+from rig.capture.frames import INCOMING, ExposureCheck, RawData, check_exposure, store_frame
 from rig.plans import (
     FrameSpec,
     MoveProjector,
@@ -332,7 +325,7 @@ class RunEngine:
             with device_errors("camera", self.devices.names["camera"], f"capture {where}"):
                 captured = self.devices.camera.capture(incoming, stem)
             try:
-                record = store_frame(self.session_dir, spec, captured)
+                record, raw = store_frame(self.session_dir, spec, captured)
                 break
             except RigError as exc:
                 for path in captured.paths:
@@ -347,13 +340,13 @@ class RunEngine:
         board = None
         lit = spec.kind == "illumination" or spec.label == "white"  # not ambient or stripes
         if self.profile.board is not None and lit and spec.view not in self.state.board_checks:
-            board = self._check_board(record, spec)
+            board = self._check_board(record, raw, spec)
         if spec.kind == "illumination" and spec.label not in self.state.exposure_checks:
-            check = self._check_exposure(record, spec)
+            check = self._check_exposure(record, raw, spec)
             entry = check.as_dict()
             if self.profile.board is not None:
                 if board is None or board["frame"] != spec.frame:
-                    board = self._board_report(record)
+                    board = self._board_report(record, raw)
                 entry["board_contrast"] = board["contrast"]
                 self._warn_board_contrast(spec.label, check, board)
             self.state.exposure_checks[spec.label] = entry
@@ -377,16 +370,21 @@ class RunEngine:
             highlight=False,
         )
 
-    def _board_report(self, record: FrameRecord) -> dict[str, Any]:
-        """Corners found and paper/ink contrast of the board in a frame."""
+    def _board_report(self, record: FrameRecord, raw: RawData) -> dict[str, Any]:
+        """Corners found and paper/ink contrast of the board in a frame (``binning``: of the
+        look they were found in)."""
         assert self.profile.board is not None
-        image = board_image(self.session_dir / record.path)
-        corners, contrast = board_visibility_report(image, self.profile.board)
-        return {"frame": record.frame, "corners": corners, "contrast": round(contrast, 4)}
+        look = look_for_board(raw, self.profile.board, BOARD_MIN_CORNERS)
+        return {
+            "frame": record.frame,
+            "corners": look.corners,
+            "contrast": round(look.contrast, 4),
+            "binning": look.binning,
+        }
 
-    def _check_board(self, record: FrameRecord, spec: FrameSpec) -> dict[str, Any]:
+    def _check_board(self, record: FrameRecord, raw: RawData, spec: FrameSpec) -> dict[str, Any]:
         """On a view's first lit frame: warn when the board is not visible enough for a pose."""
-        report = self._board_report(record)
+        report = self._board_report(record, raw)
         self.state.board_checks[spec.view] = report
         if report["corners"] < BOARD_MIN_CORNERS:
             self.console.print(
@@ -397,10 +395,8 @@ class RunEngine:
             )
         return report
 
-    def _check_exposure(self, record: FrameRecord, spec: FrameSpec) -> ExposureCheck:
-        check = check_exposure(
-            read_raw(self.session_dir / record.path), spec.label, record.exposure_s
-        )
+    def _check_exposure(self, record: FrameRecord, raw: RawData, spec: FrameSpec) -> ExposureCheck:
+        check = check_exposure(raw, spec.label, record.exposure_s)
         if check.suggestion:
             self.console.print(f"[yellow]exposure:[/] {check.suggestion}", highlight=False)
         return check

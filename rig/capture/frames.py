@@ -24,17 +24,31 @@ from rig.plans import FrameSpec
 INCOMING = ".incoming"  # under raw/: where the camera writes; anything left there is discarded
 TIFF_SUFFIXES = (".tif", ".tiff")
 NPY_SUFFIXES = (".npy",)
-SATURATED_LIMIT = 0.005  # fraction of saturated pixels that triggers "shorten the exposure"
-DARK_P99 = 0.10  # 99th percentile below this fraction of full scale: "lengthen the exposure"
+SATURATED_LIMIT = 0.005  # fraction of lit pixels saturated that triggers "shorten the exposure"
+SATURATED_LEVEL = 0.998  # of full scale: a pixel at or above it is clipped
+DARK_P99 = 0.10  # lit pixels' 99th percentile below this fraction of full scale: "lengthen"
+LIT_FLOOR = 0.02  # of full scale: above it a pixel is lit (object, board), below it background
+MIN_LIT_FRACTION = 0.001  # fewer lit pixels (hot pixels, a glint): judge the whole frame
+SAMPLE_PIXELS = 1_000_000  # the exposure check looks at about this many pixels
 
 
 @dataclass(frozen=True)
 class RawData:
-    """Sensor values with their black and white levels (enough for the exposure check)."""
+    """Sensor values with their black and white levels (enough for the exposure check); for
+    a colour-filter mosaic also each filter position's black level and white-balance gain
+    (``cfa_black``, ``cfa_gain``: one CFA period, e.g. 2x2), so the board check can build its
+    grey look from the mosaic already decoded instead of demosaicing the file again."""
 
     values: np.ndarray
     black: float
     white: float
+    cfa_black: np.ndarray | None = None
+    cfa_gain: np.ndarray | None = None
+
+    @property
+    def period(self) -> int:
+        """Rows/columns of one CFA period (1 for demosaiced or monochrome data)."""
+        return 1 if self.cfa_gain is None else int(self.cfa_gain.shape[0])
 
 
 def read_raw(path: Path) -> RawData:
@@ -56,7 +70,16 @@ def read_raw(path: Path) -> RawData:
             values = raw.raw_image_visible.copy()
             black = float(np.mean(raw.black_level_per_channel))
             white = float(raw.white_level)
-        return RawData(values, black, white)
+            pattern = raw.raw_pattern  # None for sensors without a colour-filter mosaic
+            cfa: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
+            if pattern is not None and values.ndim == 2:
+                cfa = _cfa_levels(
+                    np.asarray(pattern, dtype=np.intp),
+                    np.asarray(raw.black_level_per_channel, dtype=float),
+                    np.asarray(raw.camera_whitebalance, dtype=float),
+                    white,
+                )
+        return RawData(values, black, white, *cfa)
     except RigError:
         raise
     except Exception as exc:
@@ -67,14 +90,31 @@ def read_raw(path: Path) -> RawData:
         ) from exc
 
 
+def _cfa_levels(
+    colours: np.ndarray, channel_black: np.ndarray, wb: np.ndarray, white: float
+) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Per CFA position: black level and gain to white-balanced [0, 1] (as LibRaw scales with
+    the camera's white balance: multipliers normalised to a smallest of 1). None when the
+    data is no square mosaic."""
+    if colours.ndim != 2 or colours.shape[0] != colours.shape[1] or colours.shape[0] < 2:
+        return None, None
+    wb = wb.copy()
+    if wb.size > 3 and wb[3] <= 0:  # RGBG sensors: the second green takes the first's gain
+        wb[3] = wb[1]
+    wb = wb / wb[wb > 0].min() if np.any(wb > 0) else np.ones_like(wb)
+    wb[wb <= 0] = 1.0
+    black = channel_black[colours]
+    return black, wb[colours] / np.maximum(white - black, 1e-12)
+
+
 def _full_scale(values: np.ndarray) -> float:
     if np.issubdtype(values.dtype, np.integer):
         return float(np.iinfo(values.dtype).max)
     return 1.0
 
 
-def verify_file(path: Path) -> None:
-    """Exists, non-empty, decodes."""
+def verify_file(path: Path) -> RawData:
+    """Exists, non-empty, decodes; the decoded data (the checks after it reuse it)."""
     if not path.is_file():
         raise RigError(
             f"the camera reported {path} but it is not on disk",
@@ -82,15 +122,19 @@ def verify_file(path: Path) -> None:
         )
     if path.stat().st_size == 0:
         raise RigError(f"frame file {path} is empty", "check free disk space and the cable")
-    read_raw(path)
+    return read_raw(path)
 
 
 @dataclass(frozen=True)
 class ExposureCheck:
+    """Levels of the lit region (pixels above LIT_FLOOR; the whole frame when hardly any is
+    lit), relative to full scale."""
+
     label: str
-    saturated_fraction: float
-    mean_level: float
-    p99_level: float
+    saturated_fraction: float  # of the lit pixels
+    mean_level: float  # whole frame
+    p99_level: float  # of the lit pixels
+    lit_fraction: float
     exposure_s: float
     suggestion: str | None
 
@@ -99,66 +143,57 @@ class ExposureCheck:
             "saturated_fraction": round(self.saturated_fraction, 6),
             "mean_level": round(self.mean_level, 6),
             "p99_level": round(self.p99_level, 6),
+            "lit_fraction": round(self.lit_fraction, 6),
             "exposure_s": self.exposure_s,
             "suggestion": self.suggestion,
         }
 
 
-def check_exposure(raw: RawData, label: str, exposure_s: float) -> ExposureCheck:
-    """Saturated fraction and levels relative to full scale, with a concrete suggestion."""
+def exposure_sample(raw: RawData) -> np.ndarray:
+    """Levels (black 0, white 1) of whole CFA periods on a regular grid, about SAMPLE_PIXELS
+    of them: a 21 MP frame costs what a 1 MP one does and every colour keeps its share."""
+    h, w = raw.values.shape[:2]
+    period = max(raw.period, 1)
+    step = max(1, int(np.ceil(np.sqrt(h * w / SAMPLE_PIXELS))))  # keep one period in step
+    rows = np.flatnonzero((np.arange(h) // period) % step == 0)
+    cols = np.flatnonzero((np.arange(w) // period) % step == 0)
+    sample = raw.values[np.ix_(rows, cols)] if step > 1 else raw.values
     span = max(raw.white - raw.black, 1e-12)
-    level = (raw.values.astype(np.float64) - raw.black) / span
-    saturated = float(np.mean(raw.values >= raw.white - 0.002 * span))
-    mean = float(level.mean())
-    p99 = float(np.percentile(level, 99.0))
+    return ((sample.astype(np.float32) - np.float32(raw.black)) / np.float32(span)).ravel()
+
+
+def check_exposure(raw: RawData, label: str, exposure_s: float) -> ExposureCheck:
+    """Judge the lit region, not the whole frame: a small object on a black background is
+    well exposed when the object is, however dark the rest. Saturated fraction and 99th
+    percentile of the pixels above LIT_FLOOR, with a concrete suggestion."""
+    level = exposure_sample(raw)
+    lit = level[level > LIT_FLOOR]
+    lit_fraction = lit.size / max(level.size, 1)
+    judged = lit if lit_fraction >= MIN_LIT_FRACTION else level  # hot pixels are no object
+    saturated = float(np.mean(judged >= SATURATED_LEVEL))
+    p99 = float(np.percentile(judged, 99.0))
     suggestion = None
     if saturated > SATURATED_LIMIT:
         factor = 0.5 if saturated < 0.05 else 0.25
         word = "halve" if factor == 0.5 else "quarter"
         suggestion = (
-            f"{label}: {100 * saturated:.1f} % pixels saturated — {word} the exposure "
-            f"to {format_shutter(exposure_s * factor)}"
+            f"{label}: {100 * saturated:.1f} % of the lit pixels saturated — {word} the "
+            f"exposure to {format_shutter(exposure_s * factor)}"
         )
     elif p99 < DARK_P99:
         stops = int(np.clip(np.floor(np.log2(0.8 / max(p99, 1e-6))), 1, 6))
-        suggestion = (
-            f"{label}: underexposed (99 % of pixels below {100 * p99:.0f} % of full "
-            f"scale) — lengthen the exposure {stops} stop{'s' * (stops > 1)} to "
-            f"{format_shutter(exposure_s * 2**stops)}"
+        where = (
+            f"99 % of the lit pixels below {100 * p99:.0f} % of full scale"
+            if judged is lit
+            else f"nothing above {100 * LIT_FLOOR:.0f} % of full scale"
         )
-    return ExposureCheck(label, saturated, mean, p99, exposure_s, suggestion)
-
-
-def board_image(path: Path) -> np.ndarray:
-    """A quick 8-bit RGB look at a frame for the board check: RAW through LibRaw with
-    bilinear demosaicing (half size for large sensors, camera white balance, BT.709 gamma,
-    no auto-brightening, so the board's contrast tells about the exposure), linear
-    TIFF/NumPy frames through :func:`reconstruct.board.linear_to_u8`."""
-    from reconstruct.board import linear_to_u8
-
-    suffix = path.suffix.lower()
-    if suffix in TIFF_SUFFIXES + NPY_SUFFIXES:
-        data = read_raw(path)
-        span = max(data.white - data.black, 1e-12)
-        return linear_to_u8((data.values.astype(np.float64) - data.black) / span)
-    import rawpy
-
-    try:
-        with rawpy.imread(str(path)) as raw:
-            return np.asarray(
-                raw.postprocess(
-                    half_size=bool(raw.sizes.width > 2000),
-                    demosaic_algorithm=rawpy.DemosaicAlgorithm.LINEAR,
-                    use_camera_wb=True,
-                    no_auto_bright=True,
-                    output_bps=8,
-                )
-            )
-    except Exception as exc:
-        raise RigError(
-            f"frame file {path} does not decode for the board check ({exc})",
-            "check the camera's RAW format setting",
-        ) from exc
+        suggestion = (
+            f"{label}: underexposed ({where}) — lengthen the exposure {stops} "
+            f"stop{'s' * (stops > 1)} to {format_shutter(exposure_s * 2**stops)}"
+        )
+    return ExposureCheck(
+        label, saturated, float(level.mean()), p99, lit_fraction, exposure_s, suggestion
+    )
 
 
 def format_shutter(seconds: float) -> str:
@@ -173,8 +208,11 @@ def frame_name(spec: FrameSpec, suffix: str, index: int = 0) -> str:
     return f"v{spec.view:03d}_f{spec.frame:05d}_{spec.label}{extra}{suffix.lower()}"
 
 
-def store_frame(session_dir: Path, spec: FrameSpec, captured: CapturedFrame) -> FrameRecord:
+def store_frame(
+    session_dir: Path, spec: FrameSpec, captured: CapturedFrame
+) -> tuple[FrameRecord, RawData]:
     """Verify, fsync and rename the camera's file(s) into raw/, then append the manifest line.
+    Returns the record and the main file's decoded data (for the checks that follow).
 
     The manifest line is written last: a kill before it leaves an orphan file (deleted and
     re-captured on resume), a kill after it leaves a complete frame — never a half one."""
@@ -185,9 +223,12 @@ def store_frame(session_dir: Path, spec: FrameSpec, captured: CapturedFrame) -> 
         )
     raw_dir = session_dir / RAW_DIR
     stored: list[tuple[str, str]] = []
+    main: RawData | None = None
     for index, source in enumerate(captured.paths):
         source = Path(source)
-        verify_file(source)
+        data = verify_file(source)
+        if main is None:
+            main = data
         _fsync_file(source)
         final = raw_dir / frame_name(spec, source.suffix, index)
         os.replace(source, final)
@@ -214,7 +255,8 @@ def store_frame(session_dir: Path, spec: FrameSpec, captured: CapturedFrame) -> 
         extra=extra,
     )
     append_manifest(session_dir, record)
-    return record
+    assert main is not None
+    return record, main
 
 
 def _fsync_file(path: Path) -> None:

@@ -13,7 +13,8 @@ from rich.console import Console
 from reconstruct.board import BoardSpec, detect_board
 from reconstruct.session import Session
 from rig.capture import run_capture
-from rig.capture.frames import board_image
+from rig.capture.board_check import board_image
+from rig.capture.frames import read_raw
 from rig.profile import load_profile, parse_profile
 
 SIM_BOARD = Path(__file__).with_name("sim-board.yaml")
@@ -31,8 +32,8 @@ def test_sim_capture_on_a_board_sees_it_in_every_view(tmp_path: Path) -> None:
         assert check["corners"] >= 6 and check["contrast"] > 0.2, (view, check)
         frame = next(f for f in session.frames if f.frame == check["frame"])
         assert frame.view == view and frame.illumination == "LED2"  # the view's first lit frame
-        detection = detect_board(board_image(out / frame.path), profile.board)
-        assert detection.n_corners == check["corners"]
+        look = board_image(read_raw(out / frame.path), check["binning"])
+        assert detect_board(look, profile.board).n_corners == check["corners"]
     for label in ("LED2", "LED3"):
         assert session.info["exposure_checks"][label]["board_contrast"] > 0.2
 

@@ -7,7 +7,6 @@ import os
 import signal
 from pathlib import Path
 
-import numpy as np
 import pytest
 from fakes import PROFILE, fake_profile, fake_rig
 from rich.console import Console
@@ -15,7 +14,6 @@ from rich.console import Console
 from calibration.errors import RigError
 from reconstruct.session import MANIFEST_FILE, Session, read_manifest, verify_frames
 from rig.capture import CaptureStopped, run_capture
-from rig.capture.frames import RawData, check_exposure, format_shutter
 from rig.profile import parse_profile
 
 QUIET = Console(quiet=True)
@@ -111,20 +109,6 @@ def test_resume_uses_the_snapshot_profile(tmp_path: Path) -> None:
         capture(out, profile=fake_profile(views=2), open_rig=fake_rig(fail_at=3))
     capture(out, profile=fake_profile(views=9), resume=True)
     assert_complete(out, 2 * 4)
-
-
-def test_exposure_check_suggests_a_shutter_speed() -> None:
-    values = np.full((100, 100), 1000, dtype=np.uint16)
-    values[:10, :10] = 15000  # 1 % saturated
-    check = check_exposure(RawData(values, 2000.0, 15000.0), "LED2", 1 / 30)
-    assert check.saturated_fraction == pytest.approx(0.01)
-    assert check.suggestion is not None
-    assert check.suggestion == "LED2: 1.0 % pixels saturated — halve the exposure to 1/60 s"
-    dark = check_exposure(RawData(np.full((10, 10), 2100, np.uint16), 2000.0, 15000.0), "A", 0.01)
-    assert dark.suggestion is not None and "lengthen" in dark.suggestion
-    fine = check_exposure(RawData(np.linspace(2000, 12000, 100), 2000.0, 15000.0), "B", 0.01)
-    assert fine.suggestion is None
-    assert format_shutter(1 / 125) == "1/125 s" and format_shutter(2.0) == "2 s"
 
 
 def test_exposure_checks_are_recorded_once_per_illumination(tmp_path: Path) -> None:
