@@ -51,8 +51,17 @@ ILLUMINATIONS = ("LED1", "LED2")
 # --- setup -------------------------------------------------------------------------------
 
 
-def write_profile(path: Path, scene: str, views: int, width: int, height: int, subdiv: int) -> Path:
-    """The shipped sim profile: two illuminations, known poses, the benchmark's scene/size."""
+def write_profile(
+    path: Path,
+    scene: str,
+    views: int,
+    width: int,
+    height: int,
+    subdiv: int,
+    distances_m: tuple[float, ...] = (),
+) -> Path:
+    """The shipped sim profile: two illuminations, known poses, the benchmark's scene/size;
+    ``distances_m`` steps the camera in and out between views (hand-held)."""
     from rig.profile import resolve_profile
 
     data = yaml.safe_load(resolve_profile("sim").read_text())
@@ -68,6 +77,9 @@ def write_profile(path: Path, scene: str, views: int, width: int, height: int, s
         # the sim's default field of view (800 px focal at 640 px wide) at any image size
         "camera": {"width": width, "height": height, "focal_px": 800.0 * width / 640.0},
     }
+    if distances_m:
+        trajectory = dict(data["sim"].get("trajectory") or {})
+        data["sim"]["trajectory"] = {**trajectory, "distances_m": list(distances_m)}
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
 
@@ -399,6 +411,11 @@ def main(argv: list[str] | None = None) -> int:
         "--initial", choices=("degraded", "dense"), default="degraded",
         help="initial mesh: the true shape re-sampled and Poisson-meshed, or the CPU dense path",
     )  # fmt: skip
+    parser.add_argument(
+        "--distances", default="0.35,0.5,0.65",
+        help="camera distances (m) cycled over the views, as a hand-held capture steps in and "
+        "out; '' for one ring at the profile's radius",
+    )  # fmt: skip
     parser.add_argument("--poisson-depth", type=int, default=7)
     parser.add_argument(
         "--max-faces", type=int, default=None, help="cap of the subdivided mesh (pipeline default)"
@@ -427,8 +444,8 @@ def main(argv: list[str] | None = None) -> int:
     ]
     table = ResultTable(
         f"Paper Sec. 4.1.2 on the sim rig: {args.views} camera–light positions × "
-        f"{len(ILLUMINATIONS)} illuminations, {args.width}×{args.height}, initial mesh: "
-        f"{args.initial}",
+        f"{len(ILLUMINATIONS)} illuminations, {args.width}×{args.height}, camera distances "
+        f"{args.distances or 'one ring'} m, initial mesh: {args.initial}",
         columns,
     )
     config: dict[str, Any] = {}
@@ -442,7 +459,13 @@ def main(argv: list[str] | None = None) -> int:
         folder.mkdir(parents=True, exist_ok=True)
         session = folder / "session"
         profile = write_profile(
-            folder / "profile.yaml", scene, args.views, args.width, args.height, args.subdivisions
+            folder / "profile.yaml",
+            scene,
+            args.views,
+            args.width,
+            args.height,
+            args.subdivisions,
+            tuple(float(d) for d in args.distances.split(",") if d),
         )
         console.print(f"[bold]{scene}[/]: capture ({args.views * len(ILLUMINATIONS)} frames)")
         cap = run_worker(

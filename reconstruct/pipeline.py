@@ -251,6 +251,42 @@ def export_result(
     return figures, report, mesh_path, npz, report_path
 
 
+# Below this ratio of the farthest to the nearest camera distance the light's distance on the
+# camera plate trades against the reflectance scale (all views see the same inverse-square
+# falloff): on the sim's torus at one 0.55 m ring the offset ended 22 mm out along the optical
+# axis, with views stepping between 0.35 and 0.65 m 3 mm (docs/usage-reconstruct.md).
+MIN_DISTANCE_RATIO = 1.3
+
+
+def camera_distances(inp: OptimiseInput) -> dict[str, float]:
+    """Camera-to-object distances (to the mesh centroid): how well the capture pins down the
+    light's distance apart from the reflectance scale."""
+    centre = np.mean(inp.vertices, axis=0)
+    d = np.array([np.linalg.norm(pose.center - centre) for pose in inp.rig.poses])
+    return {
+        "min": float(d.min()),
+        "median": float(np.median(d)),
+        "max": float(d.max()),
+        "ratio": float(d.max() / max(d.min(), 1e-12)),
+    }
+
+
+def warn_if_light_distance_weak(distances: dict[str, float], light_mode: str) -> None:
+    """Tell the user, before the long solve, when every view is at about the same distance."""
+    if light_mode != "offset" or distances["ratio"] >= MIN_DISTANCE_RATIO:
+        return
+    log.warning(
+        "all views are %.2f-%.2f m from the object (ratio %.2f < %.1f): the light's distance on "
+        "the camera plate is weakly observable and may end centimetres off along the optical "
+        "axis; capture some views closer and some farther (e.g. 0.7x and 1.3x the usual "
+        "distance) next time",
+        distances["min"],
+        distances["max"],
+        distances["ratio"],
+        MIN_DISTANCE_RATIO,
+    )
+
+
 def projector_lights(
     front: FrontResult, settings: OptimiseSettings, explicit_mode: bool
 ) -> np.ndarray | None:
@@ -287,6 +323,8 @@ def run_reconstruction(
     inp = optimiser_input(front, session, basis or default_basis())
     inp.initial_light = projector_lights(front, settings, "light_mode" in (opt_conf or {}))
     t_load = time.perf_counter() - t0
+    distances = camera_distances(inp)
+    warn_if_light_distance_weak(distances, settings.light_mode)
     recon = session_dir / RECON_DIR
     t0 = time.perf_counter()
     result = optimise(inp, settings, progress)
@@ -302,6 +340,7 @@ def run_reconstruction(
             "reflectance scale are only known up to a common factor"
         ),
         "poses": {"source": front.pose_summary.source, "scale": front.pose_summary.scale},
+        "camera_distance_m": distances,
         "initial_mesh": str(front.mesh_path),
         "illuminations": sorted({k[1] for k in front.frames}),
         "timings_s": {"front": t_front, "load_frames": t_load},

@@ -58,7 +58,7 @@ PLAN_KEYS = (
     "projector",
 )
 PROJECTOR_PLAN_KEYS = ("placements", "views_per_placement")
-TRAJECTORY_KEYS = ("elevations_deg", "azimuth_start_deg")
+TRAJECTORY_KEYS = ("elevations_deg", "azimuth_start_deg", "distance_factors")
 STRUCTURED_KEYS = ("gray_code",)
 CALIBRATION_KEYS = ("store", "camera", "lights")
 DISTANCE_KEYS = ("light_offset_m", "scale_bar_m", "camera_pairs")
@@ -90,10 +90,19 @@ class ProjectorPlacements:
 @dataclass(frozen=True)
 class Trajectory:
     """Where the views should go, for the person's coverage hint: rings of equal elevation,
-    views spread evenly in azimuth on each."""
+    views spread evenly in azimuth on each, and (``distance_factors``, cycled over the views)
+    how far to step in or out relative to the usual distance — views at different distances
+    are what let the reconstruction tell the light's distance from the reflectance scale."""
 
     elevations_deg: tuple[float, ...] = (20.0, 45.0)
     azimuth_start_deg: float = 0.0
+    distance_factors: tuple[float, ...] = ()
+
+    def distance_factor(self, view: int) -> float | None:
+        """Planned distance of ``view`` relative to the usual one; None: no plan."""
+        if not self.distance_factors:
+            return None
+        return self.distance_factors[view % len(self.distance_factors)]
 
     def view_direction(self, view: int, n_views: int) -> tuple[float, float]:
         """(azimuth, elevation) in degrees of the planned view ``view`` of ``n_views``."""
@@ -433,9 +442,16 @@ class _Validator:
                     f"is {_show(elevations)}",
                     "a non-empty list of elevations in degrees",
                 )
+            factors = tr.get("distance_factors", [])
+            key = "plan.trajectory.distance_factors"
+            if not isinstance(factors, list) or not all(self.number(f, key) > 0 for f in factors):
+                raise self.fail(
+                    key, f"is {_show(factors)}", "a list of positive factors, e.g. [0.7, 1.0, 1.3]"
+                )
             trajectory = Trajectory(
                 tuple(self.number(e, "plan.trajectory.elevations_deg") for e in elevations),
                 self.number(tr.get("azimuth_start_deg", 0.0), "plan.trajectory.azimuth_start_deg"),
+                tuple(self.number(f, key) for f in factors),
             )
         placements = None
         if section.get("projector") is not None:

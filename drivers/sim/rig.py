@@ -194,6 +194,7 @@ class SimRig:
                 "views": self.trajectory.views,
                 "elevations_deg": list(self.trajectory.elevations_deg),
                 "radius_m": self.trajectory.radius_m,
+                "distances_m": list(self.trajectory.distances_m),
                 "target_m": list(self.trajectory.target_m),
             },
         }

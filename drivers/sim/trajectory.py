@@ -1,9 +1,13 @@
 """Camera poses and light positions for the simulated rig.
 
 Views lie on rings around the object (as a turntable or a hand-held walk-around would give),
-every camera looking at the target. The light is either rigidly mounted on the camera plate at
-an offset ``v`` in the camera frame (the paper's setup: ``p_c = R_c^T (v - t_c)``) or free: one
-seeded position per view, on a sphere around the object on the camera's side.
+every camera looking at the target; with ``distances_m`` the camera steps in and out between
+views, as a hand-held capture does (the paper's 74 camera–light positions): views at different
+distances are what make the light's distance observable apart from the reflectance scale.
+
+The light is either rigidly mounted on the camera plate at an offset ``v`` in the camera frame
+(the paper's setup: ``p_c = R_c^T (v - t_c)``) or free: one seeded position per view, on a
+sphere around the object on the camera's side.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ class TrajectoryConfig:
     views: int = 40
     elevations_deg: tuple[float, ...] = (20.0, 45.0)
     radius_m: float = 0.5
+    distances_m: tuple[float, ...] = ()  # cycled over the views; empty: radius_m for all
     target_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     start_azimuth_deg: float = 0.0
     light: str = "rigid"  # "rigid" or "free"
@@ -39,7 +44,7 @@ class TrajectoryConfig:
         """Build from a profile section; unknown keys and bad values raise :class:`RigError`."""
         data = dict(data or {})
         reject_unknown_keys(data, (f.name for f in fields(cls)), where)
-        for key in ("elevations_deg", "target_m", "light_offset_m"):
+        for key in ("elevations_deg", "distances_m", "target_m", "light_offset_m"):
             if key in data:
                 data[key] = tuple(float(x) for x in data[key])
         conf = cls(**data)
@@ -49,6 +54,11 @@ class TrajectoryConfig:
                 f"elevations_deg={list(conf.elevations_deg)}",
                 "use views >= 1, a positive radius and at least one elevation",
             )
+        if any(d <= 0 for d in conf.distances_m):
+            raise RigError(
+                f"{where}.distances_m = {list(conf.distances_m)}",
+                "give positive camera distances in metres, e.g. [0.35, 0.5, 0.65]",
+            )
         if conf.light not in ("rigid", "free"):
             raise RigError(f"{where}.light = {conf.light!r}", "use 'rigid' or 'free'")
         if len(conf.target_m) != 3 or len(conf.light_offset_m) != 3:
@@ -56,21 +66,26 @@ class TrajectoryConfig:
         return conf
 
 
+def view_distances(conf: TrajectoryConfig) -> np.ndarray:
+    """Camera distance of each view: ``distances_m`` cycled over the views, else ``radius_m``."""
+    if not conf.distances_m:
+        return np.full(conf.views, conf.radius_m)
+    return np.resize(np.asarray(conf.distances_m, dtype=float), conf.views)
+
+
 def ring_poses(conf: TrajectoryConfig) -> list[Pose]:
     """``conf.views`` poses spread over the elevation rings (as evenly as they divide), each
-    ring's azimuths evenly spaced and staggered between rings, all looking at the target."""
+    ring's azimuths evenly spaced and staggered between rings, all looking at the target from
+    :func:`view_distances`."""
     rings = len(conf.elevations_deg)
     counts = [conf.views // rings + (1 if k < conf.views % rings else 0) for k in range(rings)]
     target = np.asarray(conf.target_m, dtype=float)
+    distance = iter(view_distances(conf))
     poses: list[Pose] = []
     for k, (elev, n) in enumerate(zip(conf.elevations_deg, counts, strict=True)):
-        az = np.deg2rad(conf.start_azimuth_deg) + 2 * np.pi * (np.arange(n) + 0.5 * k) / max(n, 1)
-        e = np.deg2rad(elev)
+        az = conf.start_azimuth_deg + 360.0 * (np.arange(n) + 0.5 * k) / max(n, 1)
         for a in az:
-            eye = target + conf.radius_m * np.array(
-                [np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)]
-            )
-            poses.append(Pose.look_at(eye, target))
+            poses.append(Pose.look_at(_eye(target, next(distance), a, elev), target))
     return poses
 
 

@@ -85,13 +85,19 @@ def open_sim(config: Mapping[str, Any], seed: int) -> Any:
 
 def sim_config(profile: Profile) -> dict[str, Any]:
     """The profile's ``sim`` section completed from the rest of the profile, so the virtual
-    rig matches the plan: as many views, the plate offset (or a free light), the elevations,
-    the illuminations, the camera settings, the projector placements and the board (the
-    ground plane the object stands on)."""
+    rig matches the plan: as many views, the plate offset (or a free light), the elevations
+    and the distances the person is asked to step to, the illuminations, the camera settings,
+    the projector placements and the board (the ground plane the object stands on)."""
     config = copy.deepcopy(dict(profile.sim))
     config["views"] = profile.plan.views
     trajectory = dict(config.get("trajectory") or {})
     trajectory.setdefault("elevations_deg", list(profile.plan.trajectory.elevations_deg))
+    factors = profile.plan.trajectory.distance_factors
+    if factors and "distances_m" not in trajectory:  # the sim steps in and out as planned
+        from drivers.sim.trajectory import TrajectoryConfig  # the sim loads only when used
+
+        radius = float(trajectory.get("radius_m", TrajectoryConfig.radius_m))
+        trajectory["distances_m"] = [radius * f for f in factors]
     if profile.light_mount.type == "free":
         trajectory["light"] = "free"
     elif profile.light_mount.offset_m is not None:

@@ -111,8 +111,14 @@ def view_directions(devices: RigDevices, profile: Profile) -> list[tuple[float, 
     return [profile.plan.trajectory.view_direction(v, n) for v in range(n)]
 
 
-def coverage_hint(directions: list[tuple[float, float]], done: list[int], view: int) -> str:
-    """One line: an azimuth histogram of the views captured so far and where this one goes."""
+def coverage_hint(
+    directions: list[tuple[float, float]],
+    done: list[int],
+    view: int,
+    distance_factor: float | None = None,
+) -> str:
+    """One line: an azimuth histogram of the views captured so far and where this one goes
+    (and how far, relative to the usual distance, when the plan steps in and out)."""
     counts = np.zeros(AZIMUTH_BINS, dtype=int)
     for v in done:
         counts[int(directions[v][0] // (360 / AZIMUTH_BINS)) % AZIMUTH_BINS] += 1
@@ -120,9 +126,13 @@ def coverage_hint(directions: list[tuple[float, float]], done: list[int], view: 
     bars = "".join(BLOCKS[int(round(c / top * (len(BLOCKS) - 1)))] for c in counts)
     elevations = sorted({round(directions[v][1]) for v in done})
     az, el = directions[view]
+    distance = ""
+    if distance_factor is not None:
+        step = "closer" if distance_factor < 1 else "farther" if distance_factor > 1 else "usual"
+        distance = f", distance {distance_factor:g}× the usual ({step})"
     return (
         f"coverage so far: azimuth 0°[{bars}]360°, elevations {elevations or '-'}; "
-        f"this view: azimuth {round(az) % 360}°, elevation {el:.0f}°"
+        f"this view: azimuth {round(az) % 360}°, elevation {el:.0f}°{distance}"
     )
 
 
@@ -248,7 +258,12 @@ class RunEngine:
             self.console.print(f"projector: {text}", highlight=False)
 
     def _move_to(self, msg: MoveTo) -> None:
-        hint = coverage_hint(self.directions, self.state.views_done, msg.view)
+        hint = coverage_hint(
+            self.directions,
+            self.state.views_done,
+            msg.view,
+            self.profile.plan.trajectory.distance_factor(msg.view),
+        )
         if self.ask is not None and self.devices.sim is None:
             light = (
                 ", hold the light at a new place on the camera's side"

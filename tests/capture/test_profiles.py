@@ -10,6 +10,8 @@ import pytest
 import yaml
 
 from calibration.errors import RigError
+from rig.capture.devices import sim_config
+from rig.capture.engine import coverage_hint
 from rig.cli import main
 from rig.profile import load_profile, shipped_profiles
 
@@ -89,6 +91,8 @@ MALFORMED = [
     ("board.marker_length_m", 0.05, "board marker length"),
     ("board.square_length_m", DELETE, "board.square_length_m"),
     ("plan.projector", {"placements": 2}, "'plan.projector' needs a projector"),
+    ("plan.trajectory.distance_factors", [0.7, -1.0], "'plan.trajectory.distance_factors'"),
+    ("plan.trajectory.distance_factors", "closer", "'plan.trajectory.distance_factors'"),
 ]
 
 
@@ -127,3 +131,21 @@ def test_yaml_syntax_error_and_unknown_name(tmp_path: Path) -> None:
     empty.write_text("")
     with pytest.raises(RigError, match="empty"):
         load_profile(empty)
+
+
+def test_distance_factors_step_the_sim_and_prompt_the_person(tmp_path: Path) -> None:
+    data = copy.deepcopy(sim_data())
+    data["plan"]["trajectory"] = {"elevations_deg": [30], "distance_factors": [0.8, 1.0, 1.3]}
+    data["sim"] = {"trajectory": {"radius_m": 0.5}}
+    path = tmp_path / "stepped.yaml"
+    path.write_text(yaml.safe_dump(data))
+    trajectory = load_profile(path).plan.trajectory
+    assert [trajectory.distance_factor(v) for v in range(4)] == [0.8, 1.0, 1.3, 0.8]
+    config = sim_config(load_profile(path))
+    assert config["trajectory"]["distances_m"] == pytest.approx([0.4, 0.5, 0.65])
+    directions = [(0.0, 30.0), (120.0, 30.0), (240.0, 30.0)]
+    assert "distance 0.8× the usual (closer)" in coverage_hint(
+        directions, [], 0, trajectory.distance_factor(0)
+    )
+    assert "farther" in coverage_hint(directions, [0], 2, trajectory.distance_factor(2))
+    assert "distance" not in coverage_hint(directions, [0], 1, None)

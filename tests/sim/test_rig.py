@@ -145,6 +145,17 @@ def test_free_lights_differ_per_view() -> None:
     assert len({tuple(np.round(p, 6)) for p in free.light_positions}) == 6
 
 
+def test_views_step_in_and_out_through_the_distances() -> None:
+    traj = {"distances_m": [0.35, 0.5, 0.65], "elevations_deg": [20, 45]}
+    stepped = SimRig({**SMALL, "subdivisions": 3, "trajectory": traj}, seed=0)
+    distance = [float(np.linalg.norm(p.center)) for p in stepped.poses]
+    np.testing.assert_allclose(distance, [0.35, 0.5, 0.65, 0.35, 0.5, 0.65])
+    for pose in stepped.poses:  # still looking at the object
+        np.testing.assert_allclose(pose.to_camera(np.zeros((1, 3)))[0, :2], 0.0, atol=1e-12)
+    with pytest.raises(RigError, match="distances_m"):
+        SimRig({**SMALL, "subdivisions": 3, "trajectory": {"distances_m": [0.4, -0.1]}})
+
+
 def test_same_seed_same_capture_bytes(rig: SimRig, tmp_path: Path) -> None:
     twin = SimRig(SMALL, seed=3)
     files = []
