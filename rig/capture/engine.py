@@ -127,9 +127,11 @@ def coverage_hint(
     elevations = sorted({round(directions[v][1]) for v in done})
     az, el = directions[view]
     distance = ""
-    if distance_factor is not None:
-        step = "closer" if distance_factor < 1 else "farther" if distance_factor > 1 else "usual"
+    if distance_factor is not None and distance_factor != 1:
+        step = "step closer" if distance_factor < 1 else "step back"
         distance = f", distance {distance_factor:g}× the usual ({step})"
+    elif distance_factor is not None:
+        distance = ", usual distance"
     return (
         f"coverage so far: azimuth 0°[{bars}]360°, elevations {elevations or '-'}; "
         f"this view: azimuth {round(az) % 360}°, elevation {el:.0f}°{distance}"

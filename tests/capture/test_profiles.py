@@ -144,8 +144,11 @@ def test_distance_factors_step_the_sim_and_prompt_the_person(tmp_path: Path) -> 
     config = sim_config(load_profile(path))
     assert config["trajectory"]["distances_m"] == pytest.approx([0.4, 0.5, 0.65])
     directions = [(0.0, 30.0), (120.0, 30.0), (240.0, 30.0)]
-    assert "distance 0.8× the usual (closer)" in coverage_hint(
+    assert "distance 0.8× the usual (step closer)" in coverage_hint(
         directions, [], 0, trajectory.distance_factor(0)
     )
-    assert "farther" in coverage_hint(directions, [0], 2, trajectory.distance_factor(2))
+    assert "usual distance" in coverage_hint(directions, [0], 1, trajectory.distance_factor(1))
+    assert "1.3× the usual (step back)" in coverage_hint(
+        directions, [0], 2, trajectory.distance_factor(2)
+    )
     assert "distance" not in coverage_hint(directions, [0], 1, None)
