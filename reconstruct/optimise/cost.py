@@ -29,9 +29,9 @@ import scipy.sparse as sp
 
 from calibration.spectra import second_difference_matrix
 from reconstruct.forward import render_values, shading
-from reconstruct.optimise.mesh import adjacency, normal_jacobian, vertex_normals
+from reconstruct.optimise.mesh import NormalJacobian, adjacency, vertex_normals
 from reconstruct.optimise.problem import Problem
-from reconstruct.optimise.sampling import bilinear, project_with_jacobian
+from reconstruct.optimise.sampling import bilinear_taps, project_with_jacobian, sample_taps
 
 Robust = Literal["none", "huber", "cauchy"]
 TERMS = ("rendering", "spectral", "photometric", "geometric")
@@ -42,20 +42,45 @@ def _r_factor(m: np.ndarray) -> np.ndarray:
     return np.asarray(np.linalg.qr(m, mode="r"))
 
 
-def _segment_sum(values: np.ndarray, starts: np.ndarray) -> np.ndarray:
-    return np.add.reduceat(values, starts, axis=0) if len(starts) else values[:0]
+def _summation(index: np.ndarray, n_rows: int) -> sp.csr_array:
+    """(n_rows × M) 0/1 matrix summing the rows of an (M, c) array into groups ``index``: a
+    sparse product runs these segment sums in one compiled loop over all columns."""
+    m = index.size
+    return sp.csr_array(
+        (np.ones(m), (np.asarray(index, dtype=np.int64), np.arange(m))), shape=(n_rows, m)
+    )
+
+
+def _spread(pair_vertex: np.ndarray, n_vertices: int, values: np.ndarray) -> sp.csr_array:
+    """(P × r·N) matrix whose row p holds ``values[p]`` (r,) at vertex ``pair_vertex[p]``'s r
+    columns; its transpose times a (P, c) array gives ``Σ_p values_p ⊗ rows_p`` per vertex
+    (N·r, c) without forming the (P, r, c) outer products."""
+    p, r = values.shape
+    cols = (r * pair_vertex[:, None] + np.arange(r)).ravel()
+    return sp.csr_array((values.ravel(), cols, r * np.arange(p + 1)), shape=(p, r * n_vertices))
 
 
 @dataclass
 class RenderState:
-    """Per-observation quantities at one θ (derivative parts only when asked)."""
+    """Per-observation quantities at one θ; the geometric ones are per (vertex, view) pair
+    (shared by that view's frames), derivative parts only when asked."""
 
-    s: np.ndarray  # shading (M,)
+    s: np.ndarray  # shading per observation (M,)
     colour: np.ndarray  # unit-shading rendered RGB C^T L_k B α_i (M, 3)
     error: np.ndarray  # y − y_obs (M, 3)
-    g: np.ndarray | None = None  # ∂s/∂p (= −∂s/∂x with n fixed) (M, 3)
-    h: np.ndarray | None = None  # ∂s/∂n (M, 3)
-    obs_grad: np.ndarray | None = None  # ∂y_obs/∂x (M, 3, 3), None for fixed observations
+    pair_s: np.ndarray  # shading per pair (P,)
+    g: np.ndarray | None = None  # ∂s/∂p (= −∂s/∂x with n fixed) per pair (P, 3)
+    h: np.ndarray | None = None  # ∂s/∂n per pair (P, 3)
+    # ∂y_obs/∂x = image_grad (M, 3, 2) @ proj_jac (P, 2, 3) of the observation's pair;
+    # None for fixed observations.
+    image_grad: np.ndarray | None = None
+    proj_jac: np.ndarray | None = None
+
+    def obs_grad(self, obs_pair: np.ndarray) -> np.ndarray | None:
+        """∂y_obs/∂x per observation (M, 3, 3)."""
+        if self.image_grad is None or self.proj_jac is None:
+            return None
+        return self.image_grad @ self.proj_jac[obs_pair]
 
 
 @dataclass
@@ -64,6 +89,7 @@ class Geometry:
     dn: sp.bsr_array | None
     jg: sp.csr_array | None
     rg: np.ndarray  # geometric residuals (N,)
+    jg_blocks: np.ndarray | None = None  # ∂rg_i/∂x_j per block of dn's sparsity (blocks, 3)
 
 
 class JointCost:
@@ -89,7 +115,13 @@ class JointCost:
         adj = adjacency(p.faces, n)
         deg = np.asarray(adj.sum(axis=1)).ravel()
         self.ring_mean = sp.diags_array(1.0 / np.maximum(deg, 1.0)) @ adj
-        self.umbrella = sp.kron(sp.eye_array(n) - self.ring_mean, sp.eye_array(3), format="csr")
+        self.normal_jacobian = NormalJacobian(p.faces, n)
+        nj = self.normal_jacobian
+        # I − ring mean on dn's block sparsity (same 1-ring, plus the diagonal).
+        ring = self.ring_mean.tocsr()
+        self.umbrella_blocks = (nj.block_row == nj.block_col) - np.asarray(
+            ring[nj.block_row, nj.block_col]
+        ).ravel()
         e = p.weights.edges
         w = 2.0 * self.gamma[1] * np.asarray(p.weights.edge_weight, dtype=float)
         self.edge_sqrt = np.sqrt(w)
@@ -107,9 +139,27 @@ class JointCost:
         self.lap_diag = self.laplacian.diagonal()
         o = p.obs
         self.obs_weight = p.weights.rendering_scale / np.sqrt(np.maximum(o.per_vertex[o.vertex], 1))
-        self.view_index = [np.flatnonzero(o.view == c) for c in range(p.rig.n_views)]
         self.light_index = np.zeros(o.count, dtype=np.int64) if p.light_mode == "offset" else o.view
         self.light_maps = p.light_maps()  # ∂p_c/∂θ_light (N_views, 3, 3)
+        # (vertex, view) pairs: the geometry of one pair is shared by that view's frames.
+        ps = o.pair_start
+        self.obs_pair = np.repeat(np.arange(ps.size), np.diff(np.r_[ps, o.count]))
+        self.pair_vertex = o.vertex[ps]
+        self.pair_view = o.view[ps]
+        self.pair_light = self.light_index[ps]
+        self.view_pairs = [np.flatnonzero(self.pair_view == c) for c in range(p.rig.n_views)]
+        self.n_illuminations = self.Q.shape[0]
+        self.obs_to_pair = _summation(self.obs_pair, ps.size)
+        self.obs_to_group = _summation(
+            o.vertex * self.n_illuminations + o.illumination, n * self.n_illuminations
+        )
+        self.pair_to_light = _summation(self.pair_light, p.n_light // 3)
+        self.pair_to_vertex = _summation(self.pair_vertex, n)
+        self.obs_by_frame = np.argsort(o.frame, kind="stable")
+        self._evaluated: tuple[np.ndarray, bool, Geometry, RenderState] | None = None
+        self._sampled: (
+            tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None] | None
+        ) = None
 
     # --- evaluation ---------------------------------------------------------------------
 
@@ -121,14 +171,20 @@ class JointCost:
         rg = k * np.einsum("ij,ij->i", normals, offset)
         if not derivatives:
             return Geometry(normals, None, None, rg)
-        dn = normal_jacobian(X, p.faces)
+        dn = self.normal_jacobian(X)
+        nj = self.normal_jacobian
+        # ∂rg_i/∂x_j = k_i ((δ_ij − R_ij) n_iᵀ + offset_iᵀ ∂n_i/∂x_j), on dn's blocks.
+        i = nj.block_row
+        blocks = self.umbrella_blocks[:, None] * normals[i] + np.einsum(
+            "ba,bac->bc", offset[i], dn.data
+        )
+        blocks *= k[i, None]
         n = p.n_vertices
-        rows = np.repeat(np.arange(n), 3)
-        cols = np.arange(3 * n)
-        nrow = sp.csr_array(((normals * k[:, None]).ravel(), (rows, cols)), shape=(n, 3 * n))
-        erow = sp.csr_array(((offset * k[:, None]).ravel(), (rows, cols)), shape=(n, 3 * n))
-        jg = (nrow @ self.umbrella + erow @ dn.tocsr()).tocsr()
-        return Geometry(normals, dn, jg, rg)
+        jg = sp.csr_array(
+            (blocks.ravel(), (3 * nj.block_col[:, None] + np.arange(3)).ravel(), 3 * nj.indptr),
+            shape=(n, 3 * n),
+        )
+        return Geometry(normals, dn, jg, rg, blocks)
 
     def render(
         self,
@@ -137,45 +193,83 @@ class JointCost:
         light: np.ndarray,
         normals: np.ndarray,
         derivatives: bool,
+        positions: bool = True,
     ) -> RenderState:
-        """Rendered vs observed RGB for every observation (the forward model of forward.py)."""
+        """Rendered vs observed RGB for every observation (the forward model of forward.py).
+
+        ``positions=False`` leaves out the derivatives with respect to the vertex positions
+        that only the observed side has (image gradients, projection Jacobians)."""
         p, o = self.p, self.p.obs
         P = p.light_positions(light)
-        xo, no, po = X[o.vertex], normals[o.vertex], P[o.view]
-        s = shading(xo, no, po)
+        pv = self.pair_vertex
+        xp, npair = X[pv], normals[pv]
+        d = P[self.pair_view] - xp
+        s_pair = shading(xp, npair, P[self.pair_view])
         refl = A @ self.B.T
         unit = np.ones(p.n_vertices)
         colours = np.stack([render_values(refl, unit, resp) for resp in p.rig.responses])
         colour = colours[o.illumination, o.vertex]
+        s = s_pair[self.obs_pair]
         y = s[:, None] * colour
-        obs_grad = None
         if o.fixed_rgb is not None:
-            y_obs = o.fixed_rgb
+            y_obs, image_grad, duv = o.fixed_rgb, None, None
         else:
-            assert p.frames.images is not None
-            y_obs = np.empty_like(y)
-            if derivatives:
-                obs_grad = np.empty((o.count, 3, 3))
-            for c, idx in enumerate(self.view_index):
-                if idx.size == 0:
-                    continue
-                uv, duv = project_with_jacobian(p.rig.intrinsics[c], p.rig.poses[c], xo[idx])
-                value, grad = bilinear(p.frames.images, o.frame[idx], uv)
-                y_obs[idx] = value
-                if obs_grad is not None:
-                    obs_grad[idx] = grad @ duv
-        state = RenderState(s, colour, y - y_obs, obs_grad=obs_grad)
+            y_obs, image_grad, duv = self._sample(X, derivatives and positions)
+        state = RenderState(s, colour, y - y_obs, s_pair, image_grad=image_grad, proj_jac=duv)
         if derivatives:
-            d = po - xo
             dist = np.linalg.norm(d, axis=1)
-            dot = np.einsum("ij,ij->i", d, no)
-            lit = (s > 0)[:, None]
+            dot = np.einsum("ij,ij->i", d, npair)
+            lit = (s_pair > 0)[:, None]
             inv3 = 1.0 / dist**3
             state.g = np.where(
-                lit, no * inv3[:, None] - 3.0 * (dot * inv3 / dist**2)[:, None] * d, 0.0
+                lit, npair * inv3[:, None] - 3.0 * (dot * inv3 / dist**2)[:, None] * d, 0.0
             )
             state.h = np.where(lit, d * inv3[:, None], 0.0)
         return state
+
+    def _sample(
+        self, X: np.ndarray, gradient: bool
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """Observed RGB at the vertices' projections (M, 3), with ``gradient`` the image
+        gradients (M, 3, 2) and projection Jacobians per pair (P, 2, 3). The last result is
+        kept: while the positions stay (light-only stage, a rejected step's retry) the
+        samples are the same."""
+        kept = self._sampled
+        if (
+            kept is not None
+            and np.array_equal(kept[0], X)
+            and (kept[2] is not None or not gradient)
+        ):
+            return kept[1], kept[2], kept[3]
+        p, o = self.p, self.p.obs
+        images = p.frames.images
+        assert images is not None
+        pv = self.pair_vertex
+        size = images.shape[1:3]
+        index = np.empty(pv.size, dtype=np.int64)
+        frac = np.empty((pv.size, 2))
+        duv = np.empty((pv.size, 2, 3)) if gradient else None
+        for c, idx in enumerate(self.view_pairs):
+            if idx.size == 0:
+                continue
+            uv, jac = project_with_jacobian(p.rig.intrinsics[c], p.rig.poses[c], X[pv[idx]])
+            index[idx], fc, fr = bilinear_taps(size, uv)
+            frac[idx, 0], frac[idx, 1] = fc[:, 0], fr[:, 0]
+            if duv is not None:
+                duv[idx] = jac
+        # Gather frame by frame (cache-friendly), then back to observation order.
+        order = self.obs_by_frame
+        op = self.obs_pair[order]
+        taps = (index[op], frac[op, :1], frac[op, 1:])
+        value, grad = sample_taps(images, o.frame[order], taps, gradient=gradient)
+        y_obs = np.empty_like(value)
+        y_obs[order] = value
+        image_grad = None
+        if grad is not None:
+            image_grad = np.empty_like(grad)
+            image_grad[order] = grad
+        self._sampled = (np.array(X, copy=True), y_obs, image_grad, duv)
+        return y_obs, image_grad, duv
 
     def _robust(self, error: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """ρ(z) and the IRLS weight sqrt(ρ'(z)) of z = |e|² per observation."""
@@ -192,12 +286,27 @@ class JointCost:
             drho = 1.0 / (1.0 + z / d2)
         return rho, np.sqrt(drho)
 
-    def terms(self, theta: np.ndarray) -> dict[str, float]:
-        """Each term of eq. (1) (already multiplied by its γ) and the total."""
+    def terms(self, theta: np.ndarray, positions: bool = True) -> dict[str, float]:
+        """Each term of eq. (1) (already multiplied by its γ) and the total.
+
+        The derivative parts are evaluated too and kept for a :meth:`linearise` at the same θ:
+        the solver evaluates every trial step and linearises where it accepts one, so the
+        render (projections, image samples) is shared instead of repeated. ``positions``:
+        whether that linearisation will need the vertex-position derivatives."""
+        geo, state = self._evaluate(theta, positions, reuse=False)
+        self._evaluated = (np.array(theta, copy=True), positions, geo, state)
+        return self._terms(self.p.unpack(theta)[1], geo, state)
+
+    def _evaluate(
+        self, theta: np.ndarray, positions: bool, reuse: bool = True
+    ) -> tuple[Geometry, RenderState]:
+        """Geometry and render with derivatives at θ (from :meth:`terms` when it was there)."""
+        kept, self._evaluated = self._evaluated, None
+        if reuse and kept is not None and kept[1] == positions and np.array_equal(kept[0], theta):
+            return kept[2], kept[3]
         X, A, light = self.p.unpack(theta)
-        geo = self.geometry(X, derivatives=False)
-        state = self.render(X, A, light, geo.normals, derivatives=False)
-        return self._terms(A, geo, state)
+        geo = self.geometry(X, derivatives=positions)
+        return geo, self.render(X, A, light, geo.normals, derivatives=True, positions=positions)
 
     def _terms(self, A: np.ndarray, geo: Geometry, state: RenderState) -> dict[str, float]:
         rho, _ = self._robust(state.error)
@@ -239,13 +348,15 @@ class JointCost:
         n, nb, m = p.n_vertices, p.n_basis, o.count
         sx, sa, sl = p.slices()
         w = self.obs_weight
-        jx = -st.colour[:, :, None] * st.g[:, None, :]
-        if st.obs_grad is not None:
-            jx = jx - st.obs_grad
+        g, h = st.g[self.obs_pair], st.h[self.obs_pair]
+        jx = -st.colour[:, :, None] * g[:, None, :]
+        obs_grad = st.obs_grad(self.obs_pair)
+        if obs_grad is not None:
+            jx = jx - obs_grad
         jx *= w[:, None, None]
-        jn = w[:, None, None] * st.colour[:, :, None] * st.h[:, None, :]
+        jn = w[:, None, None] * st.colour[:, :, None] * h[:, None, :]
         ja = (w * st.s)[:, None, None] * self.Q[o.illumination]
-        gl = np.einsum("mab,ma->mb", self.light_maps[o.view], st.g)  # g̃ = M_cᵀ g
+        gl = np.einsum("mab,ma->mb", self.light_maps[o.view], g)  # g̃ = M_cᵀ g
         jl = w[:, None, None] * st.colour[:, :, None] * gl[:, None, :]
         rows3 = 3 * np.arange(m)
         shape = (3 * m, p.size)
@@ -267,84 +378,124 @@ class JointCost:
 
     # --- Gauss–Newton system -----------------------------------------------------------
 
-    def linearise(self, theta: np.ndarray) -> Linearisation:
+    def linearise(self, theta: np.ndarray, positions: bool = True) -> Linearisation:
         """Terms, gradient Jᵀr and the pieces of JᵀJ at θ (robust weights frozen at θ).
 
-        Per observation the rendering Jacobian over u = [δx, δn, δα] is
-        ``A_o = w (c uᵀ + V)`` with ``u = [−g, h, 0]`` (shared by the frames of one view, as
-        g and h depend only on the vertex, its normal and the view's light) and
-        ``V = [−G, 0, s Q_k]``. Expanding ``A_oᵀA_o`` lets the sums run over (vertex, view)
-        pairs and (vertex, illumination) groups instead of 14×14 products per observation.
+        ``positions=False`` (a stage with the vertices fixed) leaves out what only the
+        position parameters need — the normal Jacobian, the geometric term's Jacobian, the
+        image gradients: the α and light parts stay exact, the position parts are not
+        meaningful and must stay masked.
+
+        Per observation o of pair p = (vertex i, view c) the rendering Jacobian over
+        u = [δx, δn, δα] is ``A_o = w (c_o u_pᵀ + V_o)`` with ``u_p = [−g, h, 0]`` (shared by the
+        frames of one view: g and h depend only on the vertex, its normal and the view's light)
+        and ``V_o = [−G_o, 0, s Q_k]``. Expanding ``A_oᵀA_o`` lets the sums run over pairs and
+        (vertex, illumination) groups — sparse 0/1 products over all columns at once — instead
+        of k×k products per observation. The light enters through ``w c_o g̃_pᵀ`` (g̃ = M_cᵀ g),
+        so its coupling to vertex i is ``C_i = Σ_p a_p g̃_pᵀ`` with ``a_p = Σ_o A_oᵀ w c_o``.
         """
         p, o = self.p, self.p.obs
-        X, A, light = p.unpack(theta)
-        geo = self.geometry(X, derivatives=True)
-        st = self.render(X, A, light, geo.normals, derivatives=True)
+        A = p.unpack(theta)[1]
+        geo, st = self._evaluate(theta, positions)
         assert st.g is not None and st.h is not None
         terms = self._terms(A, geo, st)
         _, rw = self._robust(st.error)
         wt = self.obs_weight * rw
         w2 = wt**2
         n, nb = p.n_vertices, p.n_basis
-        n_ill = self.Q.shape[0]
+        n_ill = self.n_illuminations
         k = 6 + nb
-        vs, ps = o.vertex_start, o.pair_start
-        verts = o.vertex[vs]
-        pair_vertex = o.vertex[ps]
-        pvs = np.flatnonzero(np.r_[True, pair_vertex[1:] != pair_vertex[:-1]])
         col = st.colour
         r = wt[:, None] * st.error
-        u6 = np.concatenate([-st.g[ps], st.h[ps]], axis=1)  # (P, 6)
-        cq = np.empty((o.count, nb))
+        grad, duv = st.image_grad, st.proj_jac  # G_o = grad_o duv_p
+        images = grad is not None and duv is not None
+        # Observation sums per pair: |w c|², w² Vᵀc (x part −Gᵀc, α part s Qᵀc), w c·r, and
+        # the G terms through the image gradient: G's projection Jacobian is the pair's.
+        per_obs = np.zeros((o.count, 10 + nb if images else 5 + nb))
+        per_obs[:, 0] = w2 * np.einsum("mc,mc->m", col, col)
         for ill in range(n_ill):
             idx = o.illumination == ill
-            cq[idx] = col[idx] @ self.Q[ill]
-        e = np.zeros((o.count, k))
-        e[:, 6:] = (w2 * st.s)[:, None] * cq
-        if st.obs_grad is not None:
-            e[:, :3] = -w2[:, None] * np.einsum("mc,mca->ma", col, st.obs_grad)
-        e_p = _segment_sum(e, ps)
-        cc_p = _segment_sum(w2 * np.einsum("mc,mc->m", col, col), ps)
-        pair_e = _segment_sum(wt * np.einsum("mc,mc->m", col, r), ps)
+            per_obs[idx, 1 : 1 + nb] = col[idx] @ self.Q[ill]
+        per_obs[:, 1 : 1 + nb] *= w2[:, None]
+        per_obs[:, 1 + nb] = wt * np.einsum("mc,mc->m", col, r)
+        if images:
+            assert grad is not None
+            g0, g1 = grad[:, :, 0], grad[:, :, 1]
+            per_obs[:, 2 + nb] = np.einsum("mc,mc->m", g0, g0)
+            per_obs[:, 3 + nb] = np.einsum("mc,mc->m", g0, g1)
+            per_obs[:, 4 + nb] = np.einsum("mc,mc->m", g1, g1)
+            per_obs[:, 5 + nb : 7 + nb] = np.einsum("mca,mc->ma", grad, col)
+            per_obs[:, 2 + nb : 7 + nb] *= w2[:, None]
+            per_obs[:, 7 + nb : 9 + nb] = wt[:, None] * np.einsum("mca,mc->ma", grad, r)
+        pair = self.obs_to_pair @ per_obs
+        del per_obs  # the (M, ·) temporaries dominate the peak memory: free them early
+        cc = pair[:, 0]
+        pair_e = pair[:, 1 + nb]
+        u6 = np.concatenate([-st.g, st.h], axis=1)  # (P, 6)
+        a = np.zeros((len(cc), k))
+        a[:, 6:] = st.pair_s[:, None] * pair[:, 1 : 1 + nb]  # e_p = Σ_o w² V_oᵀ c_o so far
+        if images:
+            assert duv is not None
+            a[:, :3] = -np.einsum("pab,pa->pb", duv, pair[:, 5 + nb : 7 + nb])
+        a[:, :6] += cc[:, None] * u6  # a_p = e_p + cc_p u_p
+        # Σ_p u_p [a_p, cc_p u_p, e_p] per vertex: Σ u aᵀ = cc u uᵀ + u eᵀ.
+        rhs = np.concatenate([a, cc[:, None] * u6, pair_e[:, None]], axis=1)
+        sums = (_spread(self.pair_vertex, n, u6).T @ rhs).reshape(n, 6, k + 7)
+        ua, ccuu = sums[:, :, :k], sums[:, :, k : k + 6]
         gram = np.zeros((n, k, k))
-        gram[pair_vertex[pvs], :6, :6] = _segment_sum(
-            cc_p[:, None, None] * u6[:, :, None] * u6[:, None, :], pvs
-        )
-        cross = _segment_sum(u6[:, :, None] * e_p[:, None, :], pvs)  # (V, 6, k)
-        gram[pair_vertex[pvs], :6, :] += cross
-        gram[pair_vertex[pvs], :, :6] += cross.transpose(0, 2, 1)
+        gram[:, :6, :] = ua
+        gram[:, 6:, :6] = ua[:, :, 6:].transpose(0, 2, 1)
+        gram[:, :6, :6] += ua[:, :, :6].transpose(0, 2, 1) - ccuu
         grad_u = np.zeros((n, k))
-        grad_u[pair_vertex[pvs], :6] = _segment_sum(u6 * pair_e[:, None], pvs)
-        # V terms, grouped by (vertex, illumination) where they involve Q_k.
-        key = o.vertex * n_ill + o.illumination
-        size = n * n_ill
-        ss = np.bincount(key, weights=w2 * st.s**2, minlength=size).reshape(n, n_ill)
-        gram[:, 6:, 6:] += np.einsum("vk,kab->vab", ss, self.QtQ)
-        sr = np.stack(
-            [np.bincount(key, weights=wt * st.s * r[:, c], minlength=size) for c in range(3)],
-            axis=1,
-        ).reshape(n, n_ill, 3)
-        grad_u[:, 6:] += np.einsum("vkc,kcb->vb", sr, self.Q)
-        if st.obs_grad is not None:
-            G = st.obs_grad
-            gram[verts, :3, :3] += _segment_sum(
-                w2[:, None, None] * np.einsum("mca,mcb->mab", G, G), vs
-            )
-            sg = np.stack(
+        grad_u[:, :6] = sums[:, :, k + 6]
+        # V terms: s² QᵀQ and s Qᵀr by (vertex, illumination); with images, per pair
+        # duvᵀ (Σ w² gradᵀgrad) duv, −duvᵀ Σ w gradᵀr and −duvᵀ Σ w² s gradᵀQ_k.
+        groups = np.empty((o.count, 4))
+        groups[:, 0] = w2 * st.s**2
+        groups[:, 1:4] = (wt * st.s)[:, None] * r
+        sums = (self.obs_to_group @ groups).reshape(n, n_ill, 4)
+        gram[:, 6:, 6:] += np.einsum("vk,kab->vab", sums[:, :, 0], self.QtQ)
+        grad_u[:, 6:] += np.einsum("vkc,kcb->vb", sums[:, :, 1:4], self.Q)
+        if images:
+            assert grad is not None and duv is not None
+            gq = np.empty((o.count, 2, nb))
+            grad_t = np.ascontiguousarray(grad.transpose(0, 2, 1))
+            for ill in range(n_ill):
+                idx = o.illumination == ill
+                gq[idx] = (grad_t[idx].reshape(-1, 3) @ self.Q[ill]).reshape(-1, 2, nb)
+            gq *= (w2 * st.s)[:, None, None]
+            pg = (self.obs_to_pair @ gq.reshape(-1, 2 * nb)).reshape(-1, 2, nb)
+            del gq, grad_t
+            s2 = pair[:, 2 + nb : 5 + nb]
+            gtg = np.stack([s2[:, 0], s2[:, 1], s2[:, 1], s2[:, 2]], 1).reshape(-1, 2, 2)
+            per_pair = np.concatenate(
                 [
-                    np.bincount(key, weights=w2 * st.s * G[:, c, a], minlength=size)
-                    for c in range(3)
-                    for a in range(3)
+                    (duv.transpose(0, 2, 1) @ gtg @ duv).reshape(-1, 9),
+                    np.einsum("pab,pa->pb", duv, pair[:, 7 + nb : 9 + nb]),
+                    (duv.transpose(0, 2, 1) @ pg).reshape(-1, 3 * nb),
                 ],
                 axis=1,
-            ).reshape(n, n_ill, 3, 3)  # Σ w² s G (c, a)
-            xa = -np.einsum("vkca,kcb->vab", sg, self.Q)
+            )
+            vsum = self.pair_to_vertex @ per_pair
+            gram[:, :3, :3] += vsum[:, :9].reshape(n, 3, 3)
+            grad_u[:, :3] -= vsum[:, 9:12]
+            xa = -vsum[:, 12:].reshape(n, 3, nb)
             gram[:, :3, 6:] += xa
             gram[:, 6:, :3] += xa.transpose(0, 2, 1)
-            grad_u[verts, :3] -= _segment_sum(wt[:, None] * np.einsum("mca,mc->ma", G, r), vs)
-        pair_a = e_p.copy()
-        pair_a[:, :6] += cc_p[:, None] * u6
-        gl = np.einsum("pab,pa->pb", self.light_maps[o.view[ps]], st.g[ps])
+        # The light: g̃ = M_cᵀ g per pair, its coupling C_i and its own block.
+        gl = np.empty_like(st.g)
+        for c, idx in enumerate(self.view_pairs):
+            gl[idx] = st.g[idx] @ self.light_maps[c]
+        light_block = (self.pair_to_light @ (cc[:, None] * _outer(gl, gl))).reshape(-1, 3, 3)
+        light_grad = self.pair_to_light @ (gl * pair_e[:, None])
+        coupling: np.ndarray | sp.csr_array
+        if p.n_light == 3:
+            coupling = (_spread(self.pair_vertex, n, gl).T @ a).reshape(n, 3, k)
+            coupling = coupling.transpose(0, 2, 1).copy()  # (N, k, 3)
+        else:
+            coupling = _pair_coupling(self.pair_vertex, self.pair_light, a, gl, n, p.n_light)
+        if positions:  # the positions move next: their samples and image gradients are spent
+            self._sampled = None
         return Linearisation(
             cost=self,
             theta=theta,
@@ -353,14 +504,35 @@ class JointCost:
             A=A,
             gram=gram,
             grad_u=grad_u,
-            pair_vertex=pair_vertex,
-            pair_vertex_start=pvs,
-            pair_light=self.light_index[ps],
-            pair_a=pair_a,
-            pair_g=gl,
-            pair_e=pair_e,
-            pair_cc=cc_p,
+            coupling=coupling,
+            light_block=light_block,
+            light_grad=light_grad,
         )
+
+
+def _outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise outer products (M, r·c) of (M, r) and (M, c)."""
+    return (a[:, :, None] * b[:, None, :]).reshape(len(a), -1)
+
+
+def _pair_coupling(
+    pair_vertex: np.ndarray,
+    pair_light: np.ndarray,
+    a: np.ndarray,
+    gl: np.ndarray,
+    n_vertices: int,
+    n_light: int,
+) -> sp.csr_array:
+    """Free lights: the (N·k × n_light) coupling with one k×3 block ``a_p g̃_pᵀ`` per pair
+    (each pair is one (vertex, light), so no two blocks overlap)."""
+    k = a.shape[1]
+    rows = (k * pair_vertex)[:, None, None] + np.arange(k)[None, :, None]
+    cols = (3 * pair_light)[:, None, None] + np.arange(3)[None, None, :]
+    rows, cols = np.broadcast_arrays(rows, cols)
+    vals = a[:, :, None] * gl[:, None, :]
+    return sp.csr_array(
+        (vals.ravel(), (rows.ravel(), cols.ravel())), shape=(n_vertices * k, n_light)
+    )
 
 
 def _blocks(
@@ -375,67 +547,53 @@ def _blocks(
 
 @dataclass
 class Linearisation:
-    """JᵀJ and Jᵀr at one θ in factored form; products cost O(N + pairs), never forming J."""
+    """JᵀJ and Jᵀr at one θ in factored form: per-vertex k×k blocks over u = [δx, δn, δα]
+    (k = 6 + N_b), the vertex–light coupling and the light's own blocks. A product costs
+    O(N k²) plus the sparse normal and smoothness operators, never forming J."""
 
     cost: JointCost
     theta: np.ndarray
     terms: dict[str, float]
     geometry: Geometry
     A: np.ndarray
-    gram: np.ndarray  # per-vertex Σ A_oᵀA_o over u = [δx, δn, δα] (N, k, k)
+    gram: np.ndarray  # per-vertex Σ A_oᵀA_o over u (N, k, k)
     grad_u: np.ndarray  # (N, k)
-    pair_vertex: np.ndarray  # (P,) sorted
-    pair_vertex_start: np.ndarray  # first pair of each observed vertex
-    pair_light: np.ndarray
-    pair_a: np.ndarray  # Σ_o A_oᵀ(w c_o) per (vertex, view) pair (P, k)
-    pair_g: np.ndarray  # light-parameter gradient of shading g̃ (P, 3)
-    pair_e: np.ndarray  # Σ_o (w c_o)·r_o (P,)
-    pair_cc: np.ndarray  # Σ_o |w c_o|² (P,)
-    dn: sp.csr_array = field(init=False)
-    dn_t: sp.csr_array = field(init=False)
-    jg: sp.csr_array = field(init=False)
-    jg_t: sp.csr_array = field(init=False)
+    coupling: np.ndarray | sp.csr_array  # u × light: (N, k, 3) shared offset; sparse (N·k, 3V)
+    light_block: np.ndarray  # light × light, (n_light/3, 3, 3)
+    light_grad: np.ndarray  # (n_light/3, 3)
+    dn: sp.csr_array | None = field(init=False)  # None: positions fixed (see linearise)
+    jg: sp.csr_array | None = field(init=False)
 
     def __post_init__(self) -> None:
-        assert self.geometry.dn is not None and self.geometry.jg is not None
-        self.dn = self.geometry.dn.tocsr()
-        self.dn_t = self.dn.T.tocsr()
+        dn = self.geometry.dn
+        self.dn = None if dn is None else dn.tocsr()
         self.jg = self.geometry.jg
-        self.jg_t = self.jg.T.tocsr()
 
     @property
     def n_light_blocks(self) -> int:
         return self.cost.p.n_light // 3
 
-    def _pairs_to_vertices(self, values: np.ndarray) -> np.ndarray:
-        out = np.zeros((self.cost.p.n_vertices, values.shape[1]))
-        starts = self.pair_vertex_start
-        out[self.pair_vertex[starts]] = _segment_sum(values, starts)
-        return out
-
-    def _pairs_to_lights(self, values: np.ndarray) -> np.ndarray:
-        if self.n_light_blocks == 1:
-            return values.sum(axis=0, keepdims=True)
-        return np.stack(
-            [np.bincount(self.pair_light, values[:, j], self.n_light_blocks) for j in range(3)],
-            axis=1,
-        )
-
     def _lift(self, dX: np.ndarray, dA: np.ndarray) -> np.ndarray:
-        return np.concatenate([dX, (self.dn @ dX.ravel()).reshape(-1, 3), dA], axis=1)
+        dn = np.zeros_like(dX) if self.dn is None else (self.dn @ dX.ravel()).reshape(-1, 3)
+        return np.concatenate([dX, dn, dA], axis=1)
 
     def _lower(self, yu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        gx = yu[:, :3] + (self.dn_t @ yu[:, 3:6].ravel()).reshape(-1, 3)
+        """``liftᵀ``: (N, k, …) over u to x (N, 3, …) and α (N, N_b, …)."""
+        if self.dn is None:
+            return yu[:, :3], yu[:, 6:]
+        tail = yu.shape[2:]
+        back = self.dn.T @ yu[:, 3:6].reshape(3 * len(yu), -1)
+        gx = yu[:, :3] + back.reshape(len(yu), 3, *tail)
         return gx, yu[:, 6:]
 
     def gradient(self) -> np.ndarray:
         """Jᵀr (half the gradient of E)."""
         c = self.cost
         gx, ga = self._lower(self.grad_u)
-        gx = gx + (self.jg_t @ self.geometry.rg).reshape(-1, 3)
+        if self.jg is not None:
+            gx = gx + (self.jg.T @ self.geometry.rg).reshape(-1, 3)
         ga = ga + c.gamma[0] * self.A @ c.SS + (c.laplacian @ self.A) @ c.BB
-        gl = self._pairs_to_lights(self.pair_g * self.pair_e[:, None])
-        return c.p.pack(gx, ga, gl)
+        return c.p.pack(gx, ga, self.light_grad)
 
     def matvec(self, delta: np.ndarray) -> np.ndarray:
         """JᵀJ δ."""
@@ -443,12 +601,16 @@ class Linearisation:
         dX, dA, dL = c.p.unpack(delta)
         u = self._lift(dX, dA)
         yu = np.einsum("nij,nj->ni", self.gram, u)
-        t = np.einsum("pj,pj->p", self.pair_g, dL[self.pair_light])
-        yu += self._pairs_to_vertices(self.pair_a * t[:, None])
-        q = np.einsum("pk,pk->p", self.pair_a, u[self.pair_vertex])
-        yl = self._pairs_to_lights(self.pair_g * (q + self.pair_cc * t)[:, None])
+        if isinstance(self.coupling, np.ndarray):
+            yu += self.coupling @ dL[0]
+            yl = (self.coupling.reshape(-1, 3).T @ u.ravel())[None]
+        else:
+            yu += (self.coupling @ dL.ravel()).reshape(u.shape)
+            yl = (self.coupling.T @ u.ravel()).reshape(-1, 3)
+        yl = yl + np.einsum("lab,lb->la", self.light_block, dL)
         ox, oa = self._lower(yu)
-        ox = ox + (self.jg_t @ (self.jg @ dX.ravel())).reshape(-1, 3)
+        if self.jg is not None:
+            ox = ox + (self.jg.T @ (self.jg @ dX.ravel())).reshape(-1, 3)
         oa = oa + c.gamma[0] * dA @ c.SS + (c.laplacian @ dA) @ c.BB
         return c.p.pack(ox, oa, yl)
 
@@ -456,22 +618,24 @@ class Linearisation:
         """Exact diagonal blocks of JᵀJ: per vertex over [x (3), α (N_b)] and per light block
         (3×3) — the preconditioner and the Marquardt scaling."""
         c = self.cost
-        dn = self.geometry.dn
-        assert dn is not None
         n, nb = c.p.n_vertices, c.p.n_basis
         G = self.gram
         blk = np.zeros((n, 3 + nb, 3 + nb))
         blk[:, :3, :3] = G[:, :3, :3]
         blk[:, :3, 3:] = G[:, :3, 6:]
         blk[:, 3:, :3] = G[:, 6:, :3]
-        blk[:, 3:, 3:] = G[:, 6:, 6:]
-        # Normal chain: Σ_i D_ijᵀ G_nn(i) D_ij into column j, plus the i == j cross terms.
-        rows = np.repeat(np.arange(n), np.diff(dn.indptr))
-        cols = dn.indices
+        blk[:, 3:, 3:] = G[:, 6:, 6:] + c.gamma[0] * c.SS + c.lap_diag[:, None, None] * c.BB
+        dn = self.geometry.dn
+        if dn is None or self.geometry.jg_blocks is None:  # positions fixed
+            return blk, self.light_block.copy()
+        # Normal chain: Σ_i D_ijᵀ G_nn(i) D_ij into column j, plus the i == j cross terms;
+        # geometric smoothness: Σ_i J_g(i, j)ᵀ J_g(i, j) into column j (same block sparsity).
+        nj = c.normal_jacobian
+        rows, cols = nj.block_row, nj.block_col
         D = dn.data
-        contrib = np.einsum("bai,bac,bcj->bij", D, G[rows, 3:6, 3:6], D).reshape(-1, 9)
-        xx = np.stack([np.bincount(cols, contrib[:, e], n) for e in range(9)], axis=1)
-        xx = xx.reshape(n, 3, 3)
+        v = self.geometry.jg_blocks
+        contrib = D.transpose(0, 2, 1) @ G[rows, 3:6, 3:6] @ D + _outer(v, v).reshape(-1, 3, 3)
+        xx = (_summation(cols, n) @ contrib.reshape(-1, 9)).reshape(n, 3, 3)
         self_blk = rows == cols
         ii = rows[self_blk]
         Dii = D[self_blk]
@@ -480,52 +644,36 @@ class Linearisation:
         xa = np.einsum("nba,nbc->nac", Dii, G[ii, 3:6, 6:])
         blk[ii, :3, 3:] += xa
         blk[ii, 3:, :3] += xa.transpose(0, 2, 1)
-        # Geometric smoothness: J_g in (1×3) blocks.
-        jb = self.jg.tobsr(blocksize=(1, 3))
-        v = jb.data[:, 0, :]
-        outer = (v[:, :, None] * v[:, None, :]).reshape(-1, 9)
-        xx += np.stack([np.bincount(jb.indices, outer[:, e], n) for e in range(9)], axis=1).reshape(
-            n, 3, 3
-        )
         blk[:, :3, :3] += xx
-        blk[:, 3:, 3:] += c.gamma[0] * c.SS + c.lap_diag[:, None, None] * c.BB
-        gg = self.pair_cc[:, None] * (self.pair_g[:, :, None] * self.pair_g[:, None, :]).reshape(
-            -1, 9
-        )
-        light = self._pairs_to_lights_9(gg).reshape(-1, 3, 3)
-        return blk, light
-
-    def _pairs_to_lights_9(self, values: np.ndarray) -> np.ndarray:
-        if self.n_light_blocks == 1:
-            return values.sum(axis=0, keepdims=True)
-        return np.stack(
-            [np.bincount(self.pair_light, values[:, j], self.n_light_blocks) for j in range(9)],
-            axis=1,
-        )
+        return blk, self.light_block.copy()
 
     def light_coupling(self) -> np.ndarray | sp.csr_array:
-        """Vertex-block × light block of JᵀJ for the preconditioner: dense (N, 3+N_b, 3) for
-        the shared offset, sparse (N·(3+N_b), n_light) for free lights. Exact for α and for x
-        through its own normal; a vertex's pull on its neighbours' normals is left out."""
+        """Vertex-block × light block of JᵀJ over [x, α] for the preconditioner: dense
+        (N, 3+N_b, 3) for the shared offset, sparse (N·(3+N_b), n_light) for free lights.
+
+        Exact for α and for x through its own normal; a vertex's pull on its neighbours'
+        normals is left out, as the vertex blocks leave out the vertex–vertex coupling (with
+        it the bordered approximation is inconsistent and CG takes worse steps)."""
         c = self.cost
-        n, nb = c.p.n_vertices, c.p.n_basis
-        bsr = self.geometry.dn
-        assert bsr is not None
-        d_self = np.zeros((n, 3, 3))
-        rows = np.repeat(np.arange(n), np.diff(bsr.indptr))
-        self_blk = rows == bsr.indices
-        d_self[rows[self_blk]] = bsr.data[self_blk]
-        a = self.pair_a
-        v = self.pair_vertex
-        b = np.concatenate(
-            [a[:, :3] + np.einsum("pba,pb->pa", d_self[v], a[:, 3:6]), a[:, 6:]], axis=1
+        n = c.p.n_vertices
+        cu = self.coupling
+        k = 6 + c.p.n_basis
+        dn = self.geometry.dn
+        dii = np.zeros((n, 3, 3))
+        if dn is not None:
+            nj = c.normal_jacobian
+            self_blk = nj.block_row == nj.block_col
+            dii[nj.block_row[self_blk]] = dn.data[self_blk]
+        # [x, α] rows from u = [x, n, α] rows: x + D_iiᵀ n, and α.
+        lower = np.zeros((n, 3 + k - 6, k))
+        lower[:, :3, :3] = np.eye(3)
+        lower[:, :3, 3:6] = dii.transpose(0, 2, 1)
+        lower[:, 3:, 6:] = np.eye(k - 6)
+        if isinstance(cu, np.ndarray):
+            return lower @ cu
+        bsr = sp.bsr_array(
+            (lower, np.arange(n), np.arange(n + 1)),
+            shape=(n * (k - 3), n * k),
+            blocksize=lower.shape[1:],
         )
-        k = 3 + nb
-        if self.n_light_blocks == 1:
-            vals = (b[:, :, None] * self.pair_g[:, None, :]).reshape(-1, 3 * k)
-            return self._pairs_to_vertices(vals).reshape(n, k, 3)
-        vals = b[:, :, None] * self.pair_g[:, None, :]  # (P, k, 3)
-        r = (v * k)[:, None, None] + np.arange(k)[None, :, None] + np.zeros((1, 1, 3), np.int64)
-        col = (3 * self.pair_light)[:, None, None] + np.arange(3)[None, None, :]
-        col = col + np.zeros((1, k, 1), dtype=np.int64)
-        return sp.csr_array((vals.ravel(), (r.ravel(), col.ravel())), shape=(n * k, c.p.n_light))
+        return (bsr @ cu).tocsr()

@@ -67,35 +67,50 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
     return n, length
 
 
-def normal_jacobian(vertices: np.ndarray, faces: np.ndarray) -> sp.bsr_array:
+class NormalJacobian:
     """``∂n/∂X`` as a block-sparse (3N, 3N) matrix with 3×3 blocks (vertex i, ring vertex j).
 
     For a face (a, b, c) with ``N = (x_b − x_a) × (x_c − x_a)``:
-    ``∂N/∂x_a = [x_c − x_b]_×``, ``∂N/∂x_b = [x_a − x_c]_×``, ``∂N/∂x_c = [x_b − x_a]_×``;
-    these are summed into ``∂ñ_i/∂x_j`` for every corner i of the face, then multiplied by
-    ``∂n/∂ñ = (I − n nᵀ)/|ñ|``.
+    ``∂N/∂x_a = [x_c − x_b]_×``, ``∂N/∂x_b = [x_a − x_c]_×``, ``∂N/∂x_c = [x_b − x_a]_×``.
+    ``[·]_×`` is linear, so the edge vectors are summed per (i, j) block first and crossed
+    once; ``∂n/∂ñ = (I − n nᵀ)/|ñ|`` then gives ``([w]_× − n (n × w)ᵀ)/|ñ|``. The sparsity (the
+    1-ring of every vertex plus an explicit diagonal block, zero for isolated vertices) depends
+    only on the faces, so it is built once per mesh and shared by every evaluation.
     """
-    x = np.asarray(vertices, dtype=float)
-    f = np.asarray(faces, dtype=np.int64)
-    nv = len(x)
-    a, b, c = x[f[:, 0]], x[f[:, 1]], x[f[:, 2]]
-    dn = [cross_matrices(c - b), cross_matrices(a - c), cross_matrices(b - a)]  # wrt a, b, c
-    rows = np.repeat(f, 3, axis=1).ravel()  # corner i (owner of the normal)
-    cols = np.tile(f, (1, 3)).ravel()  # vertex j it depends on
-    blocks = np.stack(dn, axis=1)  # (F, 3 wrt, 3, 3)
-    data = np.broadcast_to(blocks[:, None], (len(f), 3, 3, 3, 3)).reshape(-1, 3, 3)
-    n, length = vertex_normals(x, f)
-    safe = np.where(length > 0, length, 1.0)
-    proj = (np.eye(3)[None] - n[:, :, None] * n[:, None, :]) / safe[:, None, None]
-    proj[length == 0] = 0.0
-    data = np.einsum("kab,kbc->kac", proj[rows], data)
-    # Sum duplicate (i, j) blocks: sort by key, reduce contiguous runs.
-    key = rows * nv + cols
-    order = np.argsort(key, kind="stable")
-    key, data = key[order], data[order]
-    start = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-    summed = np.add.reduceat(data, start, axis=0)
-    ukey = key[start]
-    brow, bcol = ukey // nv, ukey % nv
-    indptr = np.searchsorted(brow, np.arange(nv + 1))
-    return sp.bsr_array((summed, bcol, indptr), shape=(3 * nv, 3 * nv), blocksize=(3, 3))
+
+    def __init__(self, faces: np.ndarray, n_vertices: int):
+        f = np.asarray(faces, dtype=np.int64)
+        nv = int(n_vertices)
+        rows = np.repeat(f, 3, axis=1).ravel()  # corner i (owner of the normal)
+        cols = np.tile(f, (1, 3)).ravel()  # vertex j it depends on
+        diag = np.arange(nv, dtype=np.int64) * (nv + 1)
+        ukey, inverse = np.unique(np.r_[rows * nv + cols, diag], return_inverse=True)
+        self.faces = f
+        self.n_vertices = nv
+        self.inverse = inverse[: rows.size]
+        self.block_row = ukey // nv
+        self.block_col = ukey % nv
+        self.indptr = np.searchsorted(self.block_row, np.arange(nv + 1))
+        self.n_blocks = int(ukey.size)
+
+    def __call__(self, vertices: np.ndarray) -> sp.bsr_array:
+        x = np.asarray(vertices, dtype=float)
+        f = self.faces
+        a, b, c = x[f[:, 0]], x[f[:, 1]], x[f[:, 2]]
+        wrt = np.stack([c - b, a - c, b - a], axis=1)  # (F, 3 wrt, 3)
+        vec = np.broadcast_to(wrt[:, None], (len(f), 3, 3, 3)).reshape(-1, 3)
+        w = np.stack([np.bincount(self.inverse, vec[:, d], self.n_blocks) for d in range(3)], 1)
+        n, length = vertex_normals(x, f)
+        inv = np.where(length > 0, 1.0 / np.where(length > 0, length, 1.0), 0.0)
+        ni = n[self.block_row]
+        blocks = cross_matrices(w) - ni[:, :, None] * np.cross(ni, w)[:, None, :]
+        blocks *= inv[self.block_row][:, None, None]
+        nv = self.n_vertices
+        return sp.bsr_array(
+            (blocks, self.block_col, self.indptr), shape=(3 * nv, 3 * nv), blocksize=(3, 3)
+        )
+
+
+def normal_jacobian(vertices: np.ndarray, faces: np.ndarray) -> sp.bsr_array:
+    """``∂n/∂X`` (see :class:`NormalJacobian`; build that once to evaluate it repeatedly)."""
+    return NormalJacobian(faces, len(vertices))(vertices)

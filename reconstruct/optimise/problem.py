@@ -1,8 +1,8 @@
 """The data of one joint solve: frames, rig, observation list, regulariser weights, and the
 layout of the parameter vector θ = [X (3N), A (N·N_b), light (3 or 3·N_views)].
 
-Observations are (vertex, frame) pairs, sorted by (vertex, view, frame) so per-vertex and
-per-(vertex, view) sums are contiguous runs (``np.add.reduceat``). Which observations exist
+Observations are (vertex, frame) pairs, sorted by (vertex, view, frame) so the frames of one
+(vertex, view) pair are a contiguous run sharing that pair's geometry. Which observations exist
 (visible, inside the image, unsaturated, lit) and the weights that depend on the current
 estimate (photometric weights, geometric scale) are fixed for one solve and rebuilt between the
 outer iterations of the paper's optimisation steps.

@@ -334,7 +334,8 @@ def optimise(
     ) -> np.ndarray:
         t0 = time.perf_counter()
         cost = JointCost(problem, cfg.robust, cfg.robust_scale)
-        start = cost.terms(theta)
+        # With the stage's `positions` the solver's first linearisation reuses this render.
+        start = cost.terms(theta, positions=bool(mask[problem.slices()[0]].any()))
         history.append(
             {
                 "stage": stage,

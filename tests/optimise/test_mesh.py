@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from reconstruct.optimise.mesh import adjacency, edges, normal_jacobian, vertex_normals
+from reconstruct.optimise.mesh import (
+    NormalJacobian,
+    adjacency,
+    edges,
+    normal_jacobian,
+    vertex_normals,
+)
 from reconstruct.render import vertex_normals as render_normals
 
 
@@ -45,3 +51,21 @@ def test_adjacency_is_symmetric_and_edges_unique() -> None:
     e = edges(a)
     assert np.all(e[:, 0] < e[:, 1])
     assert len(e) == len(m.edges_unique)
+
+
+def test_normal_jacobian_is_reusable_and_keeps_isolated_vertices() -> None:
+    """One sparsity serves every evaluation; an unreferenced vertex gets an explicit zero
+    diagonal block (its normal is the constant +z), so operators sharing the sparsity
+    (the geometric term's Jacobian) still have a place for it."""
+    rng = np.random.default_rng(3)
+    m = trimesh.creation.icosphere(1)
+    X = np.vstack([np.asarray(m.vertices), [[2.0, 0.0, 0.0]]])
+    nj = NormalJacobian(m.faces, len(X))
+    for _ in range(2):
+        X = X + 0.02 * rng.normal(size=X.shape)
+        D = nj(X).toarray()
+        assert np.allclose(D, normal_jacobian(X, m.faces).toarray())
+        assert np.array_equal(D[-3:], np.zeros((3, 3 * len(X))))
+    last = len(X) - 1
+    assert nj.block_row[-1] == last and nj.block_col[-1] == last
+    assert nj.indptr[-1] - nj.indptr[-2] == 1

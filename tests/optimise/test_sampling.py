@@ -3,9 +3,16 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.ndimage import map_coordinates
 
 from reconstruct.camera import Intrinsics, Pose
-from reconstruct.optimise.sampling import bilinear, project_with_jacobian, taps_valid
+from reconstruct.optimise.sampling import (
+    bilinear,
+    bilinear_taps,
+    project_with_jacobian,
+    sample_taps,
+    taps_valid,
+)
 
 
 def test_pixel_centres_and_linear_images_are_exact() -> None:
@@ -59,3 +66,34 @@ def test_projection_jacobian_with_distortion() -> None:
         d[k] = h
         fd = intr.project_camera(pose.to_camera(x + d)) - intr.project_camera(pose.to_camera(x - d))
         assert np.allclose(duv[:, :, k], fd / (2 * h), rtol=1e-5, atol=1e-3)
+
+
+def test_shared_taps_sample_every_frame_of_a_view() -> None:
+    """One projection's taps read any frame: the same values and gradients as sampling each
+    frame on its own."""
+    rng = np.random.default_rng(4)
+    img = rng.uniform(size=(3, 6, 8, 3)).astype(np.float32)
+    uv = np.array([[2.3, 3.2], [5.6, 1.9], [0.1, 7.0]])
+    taps = bilinear_taps(img.shape[1:3], uv)
+    for f in range(3):
+        frame = np.full(len(uv), f)
+        value, grad = sample_taps(img, frame, taps, gradient=True)
+        assert grad is not None
+        ref_value, ref_grad = bilinear(img, frame, uv)
+        assert np.allclose(value, ref_value) and np.allclose(grad, ref_grad)
+        coords = [uv[:, 1] - 0.5, uv[:, 0] - 0.5]  # (row, col) of the array elements
+        ndi = np.stack(
+            [map_coordinates(img[f, :, :, c], coords, order=1, mode="nearest") for c in range(3)],
+            axis=1,
+        )
+        assert np.allclose(value, ndi, atol=1e-5)
+        only, none = sample_taps(img, frame, taps, gradient=False)
+        assert np.array_equal(only, value) and none is None
+
+
+def test_points_behind_the_camera_are_clamped_not_an_error() -> None:
+    img = np.arange(2 * 5 * 6 * 3, dtype=float).reshape(2, 5, 6, 3)
+    uv = np.array([[np.nan, np.nan], [np.inf, -np.inf], [2.5, 2.5]])
+    value, grad = bilinear(img, np.array([1, 1, 1]), uv)
+    assert np.all(np.isfinite(value)) and np.all(np.isfinite(grad))
+    assert np.allclose(value[0], img[1, 0, 0]) and np.allclose(value[1], img[1, 0, 5])
