@@ -82,6 +82,8 @@ def test_resume_repairs_a_torn_manifest_and_deletes_orphans(tmp_path: Path) -> N
 
 def test_ctrl_c_finishes_the_frame_in_flight_and_resumes(tmp_path: Path) -> None:
     out = tmp_path / "s"
+    # Python's own handler, or SIG_IGN where the test run was started in the background.
+    handler_before = signal.getsignal(signal.SIGINT)
 
     def press_ctrl_c(record) -> None:  # a real SIGINT while frame 5 is being stored
         if record.frame == 5:
@@ -92,7 +94,7 @@ def test_ctrl_c_finishes_the_frame_in_flight_and_resumes(tmp_path: Path) -> None
     assert "resume with `rig capture --resume" in str(stopped.value)
     assert sorted(r.frame for r in read_manifest(out)) == list(range(6))
     assert Session.open(out).info["runs"][0]["status"] == "stopped"
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert signal.getsignal(signal.SIGINT) is handler_before  # the capture restored it
     capture(out, resume=True)
     assert_complete(out, 16)
 
