@@ -444,14 +444,14 @@ class _Validator:
                 )
             factors = tr.get("distance_factors", [])
             key = "plan.trajectory.distance_factors"
-            if not isinstance(factors, list) or not all(self.number(f, key) > 0 for f in factors):
+            if not isinstance(factors, list):
                 raise self.fail(
                     key, f"is {_show(factors)}", "a list of positive factors, e.g. [0.7, 1.0, 1.3]"
                 )
             trajectory = Trajectory(
                 tuple(self.number(e, "plan.trajectory.elevations_deg") for e in elevations),
                 self.number(tr.get("azimuth_start_deg", 0.0), "plan.trajectory.azimuth_start_deg"),
-                tuple(self.number(f, key) for f in factors),
+                tuple(self.number(f, key, positive=True) for f in factors),
             )
         placements = None
         if section.get("projector") is not None:

@@ -569,10 +569,6 @@ class Linearisation:
         self.dn = None if dn is None else dn.tocsr()
         self.jg = self.geometry.jg
 
-    @property
-    def n_light_blocks(self) -> int:
-        return self.cost.p.n_light // 3
-
     def _lift(self, dX: np.ndarray, dA: np.ndarray) -> np.ndarray:
         dn = np.zeros_like(dX) if self.dn is None else (self.dn @ dX.ravel()).reshape(-1, 3)
         return np.concatenate([dX, dn, dA], axis=1)
