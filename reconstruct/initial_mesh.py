@@ -32,9 +32,10 @@ from reconstruct.board import BoardSpec
 from reconstruct.camera import Intrinsics, Pose
 from reconstruct.decode import INDEX, DecodeIndex, load_frame
 from reconstruct.dense.board_silhouette import board_silhouette
+from reconstruct.dense.patchmatch import PatchMatchConfig, patchmatch_points
 from reconstruct.dense.poisson import poisson_mesh, read_mesh
 from reconstruct.dense.silhouette import silhouette
-from reconstruct.dense.stereo import StereoConfig, hull_stereo_points
+from reconstruct.dense.stereo import StereoConfig, hull_stereo_points, thin
 from reconstruct.dense.visual_hull import visual_hull_points
 from reconstruct.session import write_bytes_atomically
 from reconstruct.stages import run_stage
@@ -42,6 +43,7 @@ from reconstruct.stages import run_stage
 log = logging.getLogger("reconstruct.initial_mesh")
 
 MESH = "initial.ply"
+METHODS = ("hull_stereo", "patchmatch", "visual_hull")
 SUMMARY = "initial.json"
 
 
@@ -52,16 +54,18 @@ class MeshConfig:
     slack added to each silhouette against pose error (raise it to the reprojection error
     of poorly posed views); ``carve_votes``: how many views must see a voxel as background
     to carve it (2 forgives a shadow touching one view's outline); ``method``:
-    ``visual_hull`` alone, or ``hull_stereo`` which adds hull-guided NCC plane-sweep stereo
-    for what silhouettes miss (concavities); ``board``: the printed board under the object
+    ``visual_hull`` alone, ``hull_stereo`` which adds hull-guided NCC plane-sweep stereo
+    for what silhouettes miss (concavities), or ``patchmatch``: per-view PatchMatch depth and
+    normal maps searched within the hull's bounds, fused, and meshed without hull points
+    (``patchmatch`` holds its settings); ``board``: the printed board under the object
     (a ``BoardSpec`` or its profile mapping; poses must be in the board's frame), whose
     print replaces the dark background; ``floor_margin_m``: the hull is carved above this
     height over the board."""
 
     def __post_init__(self) -> None:
-        if self.method not in ("hull_stereo", "visual_hull"):
+        if self.method not in METHODS:
             raise RigError(
-                f"mesh.method {self.method!r} is unknown", "use hull_stereo or visual_hull"
+                f"mesh.method {self.method!r} is unknown", f"use one of {', '.join(METHODS)}"
             )
         self.board_spec()  # a malformed board fails here, naming the key
 
@@ -70,7 +74,7 @@ class MeshConfig:
             return self.board
         return BoardSpec.from_dict(dict(self.board), source="mesh.board")
 
-    method: str = "hull_stereo"  # or "visual_hull"
+    method: str = "hull_stereo"  # one of METHODS
     voxels: int = 96
     poisson_trim: float = 5.0
     mask_dilate_px: int = 0
@@ -78,6 +82,7 @@ class MeshConfig:
     min_views: int = 3
     num_threads: int = 1  # Poisson's OpenMP threads; more only pay on an idle many-core host
     stereo: StereoConfig = field(default_factory=StereoConfig)
+    patchmatch: PatchMatchConfig = field(default_factory=PatchMatchConfig)
     board: BoardSpec | Mapping[str, Any] | None = None
     floor_margin_m: float = 0.001
 
@@ -87,6 +92,8 @@ def mesh_config(data: Mapping[str, Any]) -> MeshConfig:
     values = dict(data)
     if isinstance(values.get("stereo"), Mapping):
         values["stereo"] = StereoConfig(**values["stereo"])
+    if isinstance(values.get("patchmatch"), Mapping):
+        values["patchmatch"] = PatchMatchConfig(**values["patchmatch"])
     if isinstance(values.get("board"), BoardSpec):
         values["board"] = values["board"].to_dict()
     return MeshConfig(**values)
@@ -117,7 +124,8 @@ def view_masks(
     intrinsics: Mapping[int, Intrinsics] | None = None,
     poses: Mapping[int, Pose] | None = None,
 ) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
-    """Silhouette and stereo image (grey, brightest frame) of each view, one view's frames in
+    """Silhouette and stereo images (grey per illumination, brightest first: (H, W, I)) of
+    each view, one view's frames in
     memory at a time: against the known print of ``board`` (then ``intrinsics`` and
     ``poses`` are needed) or a dark background. Views whose silhouette is implausible are
     left out."""
@@ -147,7 +155,8 @@ def view_masks(
                         100 * fraction)
             continue
         masks[view] = cv2.dilate(mask.astype(np.uint8), kernel) > 0 if dilate_px else mask
-        grey[view] = max(images, key=lambda im: float(im.mean())).sum(axis=2)
+        bright_first = sorted(images, key=lambda im: -float(im.mean()))
+        grey[view] = np.stack([im.sum(axis=2) for im in bright_first], axis=-1)
     return masks, grey
 
 
@@ -182,10 +191,26 @@ def dense_mesh(
     if conf.method == "hull_stereo":
         mesh.export(out_dir / "visual_hull.ply")
         points, normals, stats = hull_stereo_points(
-            mesh, points, normals, grey, masks, intrinsics, poses, voxel, conf.stereo, floor
+            mesh, points, normals, {v: g[..., 0] for v, g in grey.items()}, masks, intrinsics,
+            poses, voxel, conf.stereo, floor,
         )
         mesh = poisson_mesh(points, normals, depth, conf.poisson_trim, conf.num_threads)
         info |= stats | {"method": "visual_hull+plane_sweep_ncc+poisson"}
+    elif conf.method == "patchmatch":
+        mesh.export(out_dir / "visual_hull.ply")
+        points, normals, stats = patchmatch_points(
+            np.asarray(mesh.vertices), np.asarray(mesh.faces), grey, masks, intrinsics, poses,
+            conf.patchmatch,
+        )
+        if floor is not None:  # the masks include the object's shadow on the board
+            above = points[:, 2] > floor + voxel / 2
+            points, normals = points[above], normals[above]
+        points, normals = thin(points, normals, voxel / 4)
+        depth = conf.patchmatch.poisson_depth
+        mesh = poisson_mesh(points, normals, depth, conf.patchmatch.poisson_trim,
+                            conf.num_threads)
+        info |= stats | {"method": "visual_hull_bounded_patchmatch+poisson",
+                         "poisson_depth": depth}
     if floor is not None:  # the object stands on the board: nothing of it lies below
         vertices = np.array(mesh.vertices)
         vertices[:, 2] = np.maximum(vertices[:, 2], 0.0)

@@ -1,0 +1,99 @@
+"""PatchMatch stereo on a textured plane rendered analytically from five views."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.ndimage import map_coordinates
+
+from reconstruct.camera import Intrinsics, Pose
+from reconstruct.dense.patchmatch import (
+    PatchMatchConfig,
+    patchmatch_points,
+    patchmatch_view,
+    scaled,
+    source_views,
+)
+from reconstruct.raycast import RayCaster
+
+WIDTH, HEIGHT, FOCAL = 200, 150, 400.0
+
+
+def _texture(seed: int) -> np.ndarray:
+    return np.random.default_rng(seed).uniform(0.2, 1.0, (40, 40))
+
+
+def _render(intr: Intrinsics, pose: Pose, tex: np.ndarray, gain: float, ramp: float) -> np.ndarray:
+    """The plane z = 0 (texture over [-0.1, 0.1]^2 m) seen by a camera; a gain and a shading
+    ramp per image stand for a lamp that moves with the camera."""
+    rr, cc = np.mgrid[0:intr.height, 0:intr.width]
+    uv = np.stack([cc.ravel() + 0.5, rr.ravel() + 0.5], 1)
+    d = intr.pixel_rays(uv) @ pose.R
+    t = -pose.center[2] / d[:, 2]
+    x = pose.center + t[:, None] * d
+    coords = (x[:, :2] + 0.1) / 0.2 * (tex.shape[0] - 1)
+    value = map_coordinates(tex, [coords[:, 1], coords[:, 0]], order=3, mode="nearest")
+    shade = 1.0 + ramp * x[:, 0] / 0.1
+    return (gain * shade * value).reshape(intr.height, intr.width).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def plane_scene() -> dict:
+    intr = Intrinsics.pinhole(WIDTH, HEIGHT, FOCAL)
+    poses, images = {}, {}
+    for v, (az, el) in enumerate([(0, 70), (30, 60), (-30, 60), (90, 65), (-90, 65)]):
+        a, e = np.radians(az), np.radians(el)
+        eye = 0.5 * np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+        poses[v] = Pose.look_at(eye, np.zeros(3))
+        illum = [_render(intr, poses[v], _texture(s), 1.0 + 0.3 * v, 0.2 * (v - 2))
+                 for s in (1, 2)]
+        images[v] = np.stack(illum, axis=-1)
+    hull = trimesh.creation.box(extents=(0.2, 0.2, 0.02))  # top face 1 cm above the plane
+    masks = {v: np.ones((HEIGHT, WIDTH), bool) for v in poses}
+    return {"intr": intr, "poses": poses, "images": images, "hull": hull, "masks": masks}
+
+
+def test_scaled_intrinsics_follow_the_resized_image() -> None:
+    intr = Intrinsics("OPENCV", 640, 480, (800.0, 790.0, 320.5, 240.2, 0.1, 0.0, 0.0, 0.0))
+    half = scaled(intr, 0.5)
+    assert (half.width, half.height) == (320, 240)
+    assert half.params[:4] == pytest.approx((400.0, 395.0, 160.25, 120.1))
+    assert half.params[4] == pytest.approx(0.1)  # distortion is in normalised units
+
+
+def test_depth_of_a_textured_plane_under_changing_light(plane_scene: dict) -> None:
+    s = plane_scene
+    conf = PatchMatchConfig(scale=1.0, iterations=5, sources=4, top_k=2)
+    caster = RayCaster(s["hull"].vertices, s["hull"].faces)
+    sources = [(s["images"][o], s["intr"], s["poses"][o]) for o in (1, 2, 3, 4)]
+    vd = patchmatch_view(s["images"][0], s["masks"][0], s["intr"], s["poses"][0], sources,
+                         caster, 0.03, conf)
+    rows, cols = np.nonzero(np.isfinite(vd.distance) & (vd.cost < conf.cost_max))
+    assert len(rows) > 0.5 * WIDTH * HEIGHT
+    rays = s["intr"].pixel_rays(np.stack([cols + 0.5, rows + 0.5], 1)) @ s["poses"][0].R
+    truth = -s["poses"][0].center[2] / rays[:, 2]
+    error = np.abs(vd.distance[rows, cols] - truth)
+    pixel_m = 0.5 / FOCAL
+    assert np.median(error) < 0.5 * pixel_m  # the hull top is 8 pixels of depth in front
+    normals = vd.normal[rows, cols] @ s["poses"][0].R
+    assert np.median(normals[:, 2]) > 0.99  # the plane faces +z
+
+
+def test_fused_points_lie_on_the_plane(plane_scene: dict) -> None:
+    s = plane_scene
+    conf = PatchMatchConfig(scale=0.5, iterations=4, sources=4, top_k=2, min_consistent=2)
+    intrinsics = dict.fromkeys(s["poses"], s["intr"])
+    points, normals, stats = patchmatch_points(
+        s["hull"].vertices, s["hull"].faces, s["images"], s["masks"], intrinsics, s["poses"], conf
+    )
+    assert stats["patchmatch_points"] == len(points) > 1000
+    assert np.percentile(np.abs(points[:, 2]), 90) < 0.5 / (FOCAL * 0.5)
+    assert np.median(normals[:, 2]) > 0.99
+
+
+def test_source_views_skip_views_without_parallax() -> None:
+    poses = {v: Pose.look_at(0.5 * np.array([np.cos(a), np.sin(a), 0.3]), np.zeros(3))
+             for v, a in enumerate(np.radians([0, 1, 20, 40, 90]))}
+    near = source_views(poses, np.zeros(3), 3, min_deg=4.0, max_deg=45.0)
+    assert near[0] == [2, 3]  # 1° is no parallax, 90° is too far to match windows
