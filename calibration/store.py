@@ -33,6 +33,7 @@ from calibration import defaults
 from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID, SpectralGrid
 from calibration.spectra import resample, validate_spectrum
+from calibration.yamlio import load_yaml
 
 FORMAT = "spectral-rig-calibration/1"
 ENV_STORE = "SPECTRAL_RIG_STORE"
@@ -139,7 +140,7 @@ class CalibrationStore:
         if not self.index_path.exists():
             return []
         try:
-            data = yaml.safe_load(self.index_path.read_text(encoding="utf-8")) or {}
+            data = load_yaml(self.index_path.read_text(encoding="utf-8")) or {}
         except yaml.YAMLError as error:
             raise RigError(
                 f"calibration index {self.index_path} is not valid YAML: {error}",

@@ -18,6 +18,7 @@ import numpy as np
 import yaml
 
 from calibration.errors import RigError
+from calibration.yamlio import load_yaml
 
 # Sheet sizes (width, height) in metres, portrait.
 PAPER_SIZES_M: dict[str, tuple[float, float]] = {
@@ -60,7 +61,8 @@ class BoardSpec:
                 f"than the square length {self.square_length_m} m",
                 "use a marker about 0.75 of the square",
             )
-        if self.measured_square_length_m is not None and self.measured_square_length_m <= 0:
+        measured = self.measured_square_length_m
+        if measured is not None and not (0 < measured < float("inf")):
             raise RigError(
                 f"measured square length {self.measured_square_length_m} m is not positive",
                 "enter the measured side of one chessboard square",
@@ -267,7 +269,7 @@ class BoardSpec:
     @classmethod
     def from_yaml(cls, path: Path) -> BoardSpec:
         try:
-            data = yaml.safe_load(Path(path).read_text())
+            data = load_yaml(Path(path).read_text())
         except FileNotFoundError as exc:
             raise RigError(f"{path} does not exist", "generate it with `rig board --out`") from exc
         except yaml.YAMLError as exc:

@@ -14,6 +14,7 @@ from reconstruct import export
 from reconstruct.poses import load as load_poses
 from reconstruct.relight import Camera, encode_srgb, load_camera_file, relight, write_png
 from reconstruct.session import RECON_DIR
+from rig.outpaths import output_file
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -60,6 +61,8 @@ def parse_xyz(text: str, what: str) -> np.ndarray:
 
 
 def handle(args: argparse.Namespace) -> int:
+    if args.out is not None:
+        output_file(args.out, "--out")
     recon = Path(args.session) / RECON_DIR
     data = export.read_reflectance_npz(recon / export.REFLECTANCE_FILE)
     report_path = recon / export.REPORT_FILE
