@@ -69,6 +69,8 @@ class FrontConfig:
             if isinstance(value, kind):
                 built[name] = value
                 continue
+            if not isinstance(value or {}, Mapping):
+                raise RigError(f"config section {name} is {value!r}", "write key: value lines")
             known = {f.name for f in fields(kind)}
             bad = set(value or {}) - known
             if bad:
@@ -76,8 +78,6 @@ class FrontConfig:
                     f"unknown key(s) in config section {name}: {', '.join(sorted(bad))}",
                     f"use {', '.join(sorted(known))}",
                 )
-            if not isinstance(value or {}, Mapping):
-                raise RigError(f"config section {name} is {value!r}", "write key: value lines")
             check_types(value or {}, getattr(cls(), name), f"config {name}")
             built[name] = mesh_config(value or {}) if kind is MeshConfig else kind(**(value or {}))
         return cls(**built)

@@ -28,7 +28,7 @@ from reconstruct import export, plots
 from reconstruct.camera import Intrinsics
 from reconstruct.decode import load_frame
 from reconstruct.forward import response_matrix
-from reconstruct.front import FrontResult, run_front
+from reconstruct.front import FrontConfig, FrontResult, run_front
 from reconstruct.optimise.checkpoint import FILE as CHECKPOINT_FILE
 from reconstruct.optimise.checkpoint import Checkpoint, input_key
 from reconstruct.optimise.mesh import vertex_normals
@@ -72,6 +72,14 @@ def load_config(path: Path | None) -> dict[str, Any]:
             f"config {path}: unknown section(s) {', '.join(sorted(unknown))}",
             f"use {', '.join((*FRONT_SECTIONS, 'optimise'))}",
         )
+    # Checked now, not when the stage is reached minutes later.
+    try:
+        FrontConfig.from_mapping({k: v for k, v in data.items() if k in FRONT_SECTIONS})
+    except RigError as error:
+        raise RigError(f"config {path}: {error.problem}", error.fix) from error
+    except TypeError as error:  # a nested section's dataclass rejected a key
+        raise RigError(f"config {path}: {error}", "check the section's keys") from error
+    OptimiseSettings.from_mapping(data.get("optimise"), f"config {path} optimise")
     return data
 
 

@@ -18,7 +18,7 @@ import numpy as np
 import yaml
 
 from calibration.errors import RigError
-from calibration.yamlio import load_yaml
+from calibration.yamlio import read_yaml
 
 # Sheet sizes (width, height) in metres, portrait.
 PAPER_SIZES_M: dict[str, tuple[float, float]] = {
@@ -268,12 +268,9 @@ class BoardSpec:
 
     @classmethod
     def from_yaml(cls, path: Path) -> BoardSpec:
-        try:
-            data = load_yaml(Path(path).read_text())
-        except FileNotFoundError as exc:
-            raise RigError(f"{path} does not exist", "generate it with `rig board --out`") from exc
-        except yaml.YAMLError as exc:
-            raise RigError(f"{path} is not valid YAML: {exc}", "fix or regenerate it") from exc
+        if not Path(path).exists():
+            raise RigError(f"{path} does not exist", "generate it with `rig board --out`")
+        data = read_yaml(Path(path), "board snippet", "fix or regenerate it with `rig board`")
         return cls.from_dict(data, source=str(path))
 
     def with_measured_square(self, measured_square_m: float) -> BoardSpec:

@@ -84,6 +84,8 @@ class OptimiseSettings:
         cls, conf: Mapping[str, Any] | None, where: str = "config"
     ) -> OptimiseSettings:
         """Settings from a mapping (YAML); unknown keys are an error naming the key."""
+        if not isinstance(conf or {}, Mapping):
+            raise RigError(f"{where}: the section is {conf!r}", "write it as key: value lines")
         conf = dict(conf or {})
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(conf) - known)
@@ -92,7 +94,10 @@ class OptimiseSettings:
                 f"{where}: unknown optimise setting(s) {', '.join(unknown)}",
                 f"use only {', '.join(sorted(known))}",
             )
-        solver = dict(conf.pop("solver", {}) or {})
+        solver = conf.pop("solver", {}) or {}
+        if not isinstance(solver, Mapping):
+            raise RigError(f"{where}: solver is {solver!r}", "write it as key: value lines")
+        solver = dict(solver)
         sknown = {f.name for f in fields(SolverSettings)}
         if set(solver) - sknown:
             raise RigError(

@@ -105,7 +105,7 @@ def cmd_remove(args: argparse.Namespace) -> int:
 def cmd_init_store(args: argparse.Namespace) -> int:
     from calibration.store import CalibrationStore
 
-    root = Path(args.dir) if args.dir else _store_root(args)
+    root = output_dir(Path(args.dir), "DIR") if args.dir else _store_root(args)
     store = CalibrationStore.create_default(root)
     console.print(f"wrote default calibration store to {store.root}:")
     for e in store.entries():

@@ -10,6 +10,7 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
+from calibration.errors import RigError
 from reconstruct.optimise.solver import IterationRecord
 from reconstruct.pipeline import Reconstruction, load_config, run_reconstruction
 from reconstruct.run_status import describe, read_status
@@ -102,6 +103,10 @@ def handle(args: argparse.Namespace) -> int:
     if args.status:
         print(describe(read_status(Path(args.session) / RECON_DIR)))
         return 0
+    if args.initial_mesh is not None and not args.initial_mesh.is_file():
+        raise RigError(
+            f"--initial-mesh {args.initial_mesh} is not a file", "give a PLY, OBJ, STL, OFF or GLB"
+        )
     config = load_config(args.config)
     rec = run_reconstruction(args.session, config, args.initial_mesh, ProgressPrinter(console))
     summary(console, rec)
