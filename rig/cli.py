@@ -7,6 +7,7 @@ import importlib
 import logging
 import signal
 import sys
+import threading
 from collections.abc import Sequence
 from types import FrameType
 from typing import NoReturn
@@ -87,7 +88,8 @@ def handle_sigterm() -> None:
     import that prints a native stack dump on SIGTERM; importing it first lets ours replace it."""
     import pycolmap  # noqa: F401  (its import installs the handler ours must override)
 
-    signal.signal(signal.SIGTERM, _terminate)
+    if threading.current_thread() is threading.main_thread():  # signals go to the main thread
+        signal.signal(signal.SIGTERM, _terminate)
 
 
 def _line(label: str, style: str, message: str) -> Text:
@@ -134,7 +136,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
         return 1
     finally:
-        signal.signal(signal.SIGTERM, previous if previous is not None else signal.SIG_DFL)
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGTERM, previous if previous is not None else signal.SIG_DFL)
 
 
 if __name__ == "__main__":

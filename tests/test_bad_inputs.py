@@ -302,6 +302,13 @@ CALIBRATE = [
 COMMAND_LINE = [
     Case("cli-unknown-command", lambda tmp: ["reconstrct", str(tmp)], r"reconstrct"),
     Case("cli-unknown-flag", lambda tmp: ["reconstruct", str(tmp), "--fast"], r"--fast"),
+    Case("capture-out-a-file",
+         lambda tmp: ["capture", "--profile", "sim", "--out", str(write(tmp / "f", "x")), "--yes"],
+         r"--out .*f is an existing file"),
+    Case("capture-out-under-a-file",
+         lambda tmp: ["capture", "--profile", "sim", "--out", str(write(tmp / "f", "x") / "s"),
+                      "--yes"],
+         r"--out .*f is a file"),
     Case("cli-demo-out-a-file", lambda tmp: ["demo", "--out", str(write(tmp / "f", "x"))],
          r"--out .*f is an existing file"),
 ]

@@ -94,7 +94,7 @@ def summary(console: Console, rec: Reconstruction) -> None:
 
 # Exit status of a reconstruction that finished without some unusable frames (corrupt or
 # changed RAW files, skipped by decode.on_bad_frame: skip): the outputs are written, but the
-# caller (a script, `rig batch`) must not take the run as clean.
+# caller (a script, a batch of sessions) must not take the run as clean.
 EXIT_SKIPPED_FRAMES = 3
 
 
