@@ -3,9 +3,10 @@
 The optimisation is the long part of ``rig reconstruct`` (minutes to hours); a kill, a crash or
 Ctrl-C would otherwise lose all of it. After the light stage and after each joint stage the
 state (vertices, basis weights, light, the starting weights, the history) is written
-atomically to ``recon/optimise/checkpoint.npz`` under a key hashing the settings and every
-input array, so a later run with the same inputs resumes after the last completed stage and
-ends with the same numbers as a run never interrupted; any other input starts afresh.
+atomically to ``recon/optimise/checkpoint.npz`` under a key hashing the optimiser's source,
+the settings and every input array, so a later run with the same inputs resumes after the last
+completed stage and ends with the same numbers as a run never interrupted; any other code,
+setting or input starts afresh.
 """
 
 from __future__ import annotations
@@ -48,9 +49,18 @@ class OptimiseState:
     seconds: dict[str, float]
 
 
+def code_digest() -> bytes:
+    """Hash of the optimiser's source: a checkpoint written by other code is not resumed."""
+    digest = hashlib.sha256()
+    for path in sorted(Path(__file__).parent.glob("*.py")):
+        digest.update(path.read_bytes())
+    return digest.digest()
+
+
 def input_key(inp: OptimiseInput, settings: OptimiseSettings) -> str:
-    """Hash of the settings and of every array the optimisation reads."""
-    digest = hashlib.sha256(json.dumps(asdict(settings), sort_keys=True, default=str).encode())
+    """Hash of the optimiser's code, the settings and every array the optimisation reads."""
+    digest = hashlib.sha256(code_digest())
+    digest.update(json.dumps(asdict(settings), sort_keys=True, default=str).encode())
     rig, frames = inp.rig, inp.frames
     arrays: list[Any] = [inp.vertices, inp.faces, inp.visibility, inp.basis.B, rig.responses]
     arrays += [frames.view, frames.illumination, frames.images, frames.valid]
