@@ -6,6 +6,11 @@ Config (YAML, all optional): the front's sections ``decode``, ``poses``, ``mesh`
 ``solver``). On projector sessions the front recovers one light position per view; the
 optimiser then starts from them and, unless ``optimise.light_mode`` says otherwise, keeps them
 fixed (``fixed``) as the paper does.
+
+A run is tracked in ``recon/status.json`` (:mod:`reconstruct.run_status`), the optimisation
+resumes from ``recon/optimise/checkpoint.npz`` (:mod:`reconstruct.optimise.checkpoint`) and the
+outputs are swapped in as one set (:mod:`reconstruct.publish`), so a kill at any instant loses
+at most the stage in progress and never leaves old and new outputs mixed.
 """
 
 from __future__ import annotations

@@ -295,6 +295,24 @@ CALIBRATE = [
     Case("calibrate-select-plot-folder", calibrate("select", "--plot", "TMP/adir"),
          r"--plot .*adir is a folder"),
     Case("calibrate-init-store-a-file", calibrate("init-store", "TMP/afile"), r"afile"),
+    Case("calibrate-import-binary",
+         lambda tmp: ["calibrate", "import", str(write(tmp / "s.txt", BINARY)), "--kind", "light",
+                      "--name", "X", "--store", str(tmp / "st")],
+         r"s\.txt is a binary file"),
+    Case("calibrate-import-word",
+         lambda tmp: ["calibrate", "import", str(write(tmp / "s.csv", "wavelength_nm,power\n400,"
+                                                       "abc\n")), "--kind", "light", "--name",
+                      "X", "--store", str(tmp / "st")],
+         r"s\.csv:2: not a number"),
+    Case("calibrate-import-too-short",
+         lambda tmp: ["calibrate", "import", str(write(tmp / "s.csv", "wavelength_nm,power\n400,1"
+                                                       "\n410,2\n")), "--kind", "light", "--name",
+                      "X", "--store", str(tmp / "st")],
+         r"s\.csv: only 2 samples"),
+    Case("calibrate-import-missing",
+         lambda tmp: ["calibrate", "import", str(tmp / "none.csv"), "--kind", "light", "--name",
+                      "X", "--store", str(tmp / "st")],
+         r"none\.csv does not exist"),
 ]
 
 
@@ -313,7 +331,14 @@ COMMAND_LINE = [
          r"--out .*f is an existing file"),
 ]
 
-TABLE = PROFILES + CONFIGS + SESSIONS + BOARD + RELIGHT + CALIBRATE + COMMAND_LINE
+EVALUATE = [
+    Case("evaluate-no-recon",
+         lambda tmp: ["evaluate", str(tmp / "nowhere"), "--gt-mesh", str(tmp / "m.ply"),
+                      "--gt-reflectance", str(tmp / "r.npy")],
+         r"nowhere"),
+]
+
+TABLE = PROFILES + CONFIGS + SESSIONS + BOARD + RELIGHT + CALIBRATE + EVALUATE + COMMAND_LINE
 
 
 def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
