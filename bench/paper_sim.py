@@ -300,6 +300,8 @@ def do_joint(
     """(b) the full pipeline (front stages + joint optimisation + export)."""
     from reconstruct.pipeline import run_reconstruction
 
+    # A finished optimisation checkpoint of an earlier run would be resumed, not timed.
+    shutil.rmtree(session / "recon" / "optimise", ignore_errors=True)
     t0 = time.perf_counter()
     rec = run_reconstruction(session, config, initial)
     seconds = time.perf_counter() - t0

@@ -33,6 +33,7 @@ from calibration import defaults
 from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID, SpectralGrid
 from calibration.spectra import resample, validate_spectrum
+from calibration.yamlio import load_yaml, yaml_problem
 
 FORMAT = "spectral-rig-calibration/1"
 ENV_STORE = "SPECTRAL_RIG_STORE"
@@ -139,10 +140,11 @@ class CalibrationStore:
         if not self.index_path.exists():
             return []
         try:
-            data = yaml.safe_load(self.index_path.read_text(encoding="utf-8")) or {}
-        except yaml.YAMLError as error:
+            data = load_yaml(self.index_path.read_text(encoding="utf-8")) or {}
+        except (yaml.YAMLError, UnicodeDecodeError) as error:
+            problem = yaml_problem(error) if isinstance(error, yaml.YAMLError) else "not UTF-8"
             raise RigError(
-                f"calibration index {self.index_path} is not valid YAML: {error}",
+                f"calibration index {self.index_path} is not valid YAML: {problem}",
                 "fix the file or restore it from a session's calibration/ snapshot",
             ) from error
         if not isinstance(data, dict) or data.get("format") != FORMAT:

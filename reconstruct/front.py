@@ -21,6 +21,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from calibration.errors import RigError
 from reconstruct import decode, initial_mesh, poses, subdivide, visibility
 from reconstruct.camera import Intrinsics, Pose
+from reconstruct.config_check import check_types
 from reconstruct.decode import DecodeConfig, DecodedFrame, DecodeIndex
 from reconstruct.dense.poisson import read_mesh
 from reconstruct.initial_mesh import MeshConfig, mesh_config
@@ -68,6 +69,8 @@ class FrontConfig:
             if isinstance(value, kind):
                 built[name] = value
                 continue
+            if not isinstance(value or {}, Mapping):
+                raise RigError(f"config section {name} is {value!r}", "write key: value lines")
             known = {f.name for f in fields(kind)}
             bad = set(value or {}) - known
             if bad:
@@ -75,6 +78,7 @@ class FrontConfig:
                     f"unknown key(s) in config section {name}: {', '.join(sorted(bad))}",
                     f"use {', '.join(sorted(known))}",
                 )
+            check_types(value or {}, getattr(cls(), name), f"config {name}")
             built[name] = mesh_config(value or {}) if kind is MeshConfig else kind(**(value or {}))
         return cls(**built)
 

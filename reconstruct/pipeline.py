@@ -6,6 +6,11 @@ Config (YAML, all optional): the front's sections ``decode``, ``poses``, ``mesh`
 ``solver``). On projector sessions the front recovers one light position per view; the
 optimiser then starts from them and, unless ``optimise.light_mode`` says otherwise, keeps them
 fixed (``fixed``) as the paper does.
+
+A run is tracked in ``recon/status.json`` (:mod:`reconstruct.run_status`), the optimisation
+resumes from ``recon/optimise/checkpoint.npz`` (:mod:`reconstruct.optimise.checkpoint`) and the
+outputs are swapped in as one set (:mod:`reconstruct.publish`), so a kill at any instant loses
+at most the stage in progress and never leaves old and new outputs mixed.
 """
 
 from __future__ import annotations
@@ -18,23 +23,27 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from calibration.basis import SpectralBasis, default_basis
 from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID
 from calibration.store import CalibrationStore
+from calibration.yamlio import read_yaml
 from reconstruct import export, plots
 from reconstruct.camera import Intrinsics
 from reconstruct.decode import load_frame
 from reconstruct.forward import response_matrix
-from reconstruct.front import FrontResult, run_front
+from reconstruct.front import FrontConfig, FrontResult, run_front
+from reconstruct.optimise.checkpoint import FILE as CHECKPOINT_FILE
+from reconstruct.optimise.checkpoint import Checkpoint, input_key
 from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.problem import Frames, Rig
 from reconstruct.optimise.solver import IterationRecord
 from reconstruct.optimise.steps import OptimiseInput, OptimiseResult, OptimiseSettings, optimise
+from reconstruct.publish import publish, staging_dir
 from reconstruct.raycast import RayCaster
 from reconstruct.relight import Camera, encode_srgb, relight
+from reconstruct.run_status import RunStatus, tracked
 from reconstruct.session import RECON_DIR, Session
 from reconstruct.stages import record_timing
 
@@ -58,12 +67,8 @@ def load_config(path: Path | None) -> dict[str, Any]:
     """The reconstruct config file as a mapping (empty without a file)."""
     if path is None:
         return {}
-    try:
-        data = yaml.safe_load(Path(path).read_text()) or {}
-    except (OSError, yaml.YAMLError) as error:
-        raise RigError(
-            f"cannot read config {path}: {error}", "give a readable YAML file"
-        ) from error
+    data = read_yaml(Path(path), "config", "fix the YAML syntax (indentation, repeated keys)")
+    data = {} if data is None else data
     if not isinstance(data, dict):
         raise RigError(f"config {path} is not a mapping", "write sections like `optimise: {...}`")
     unknown = set(data) - {*FRONT_SECTIONS, "optimise"}
@@ -72,6 +77,14 @@ def load_config(path: Path | None) -> dict[str, Any]:
             f"config {path}: unknown section(s) {', '.join(sorted(unknown))}",
             f"use {', '.join((*FRONT_SECTIONS, 'optimise'))}",
         )
+    # Checked now, not when the stage is reached minutes later.
+    try:
+        FrontConfig.from_mapping({k: v for k, v in data.items() if k in FRONT_SECTIONS})
+    except RigError as error:
+        raise RigError(f"config {path}: {error.problem}", error.fix) from error
+    except TypeError as error:  # a nested section's dataclass rejected a key
+        raise RigError(f"config {path}: {error}", "check the section's keys") from error
+    OptimiseSettings.from_mapping(data.get("optimise"), f"config {path} optimise")
     return data
 
 
@@ -94,7 +107,8 @@ def session_spectra(session: Session, names: list[str]) -> tuple[np.ndarray, dic
         if entry not in store.names("light"):
             raise RigError(
                 f"illumination {name!r} has no SPD in {session.calibration_dir} (entry {entry!r})",
-                "measure it with `rig calibrate light` or name its store entry in the profile",
+                "measure it with `rig calibrate wizard` (or add it with `rig calibrate import "
+                "SPD.txt --kind light --name NAME`) or name its store entry in the profile",
             )
         spds[name] = store.light_spd(entry, DEFAULT_GRID)
     return camera, spds
@@ -314,7 +328,27 @@ def run_reconstruction(
     opt_conf = conf.pop("optimise", None)
     settings = OptimiseSettings.from_mapping(opt_conf, "config optimise")
     session = Session.open(session_dir)
+    recon = session_dir / RECON_DIR
+    with tracked(recon) as status:
+        rec = _run(session, conf, opt_conf, settings, initial_mesh, progress, basis, status)
+        if rec.report["skipped_frames"]:
+            status.end("complete", skipped_frames=len(rec.report["skipped_frames"]))
+    return rec
+
+
+def _run(
+    session: Session,
+    conf: dict[str, Any],
+    opt_conf: Mapping[str, Any] | None,
+    settings: OptimiseSettings,
+    initial_mesh: Path | None,
+    progress: Progress | None,
+    basis: SpectralBasis | None,
+    status: RunStatus,
+) -> Reconstruction:
+    session_dir = session.root
     t0 = time.perf_counter()
+    status.stage("front")
     front = run_front(
         session_dir, {k: v for k, v in conf.items() if k in FRONT_SECTIONS}, initial_mesh
     )
@@ -327,7 +361,9 @@ def run_reconstruction(
     warn_if_light_distance_weak(distances, settings.light_mode)
     recon = session_dir / RECON_DIR
     t0 = time.perf_counter()
-    result = optimise(inp, settings, progress)
+    status.stage("optimise")
+    checkpoint = Checkpoint(recon / "optimise" / CHECKPOINT_FILE, input_key(inp, settings))
+    result = optimise(inp, settings, progress, checkpoint)
     record_timing(recon, "optimise", time.perf_counter() - t0, False)
     t0 = time.perf_counter()
     absolute = front.scale_is_metric
@@ -343,12 +379,18 @@ def run_reconstruction(
         "camera_distance_m": distances,
         "initial_mesh": str(front.mesh_path),
         "illuminations": sorted({k[1] for k in front.frames}),
+        "skipped_frames": dict(front.skipped_frames),
         "timings_s": {"front": t_front, "load_frames": t_load},
     }
+    status.stage("export")
+    staging = staging_dir(recon)
     figures, report, mesh_path, npz, report_path = export_result(
-        recon, inp, result, settings, extra
+        staging, inp, result, settings, extra
     )
     report["timings_s"]["export"] = time.perf_counter() - t0
     export.write_report(report_path, report)
+    publish(recon, staging)
     record_timing(recon, "export", report["timings_s"]["export"], False)
+    mesh_path, npz, report_path = (recon / p.name for p in (mesh_path, npz, report_path))
+    figures = [recon / p.name for p in figures]
     return Reconstruction(recon, mesh_path, npz, report_path, figures, result, report)

@@ -22,6 +22,7 @@ from calibration.errors import RigError
 from calibration.grid import SpectralGrid
 from calibration.spectra import resample
 from calibration.store import read_spectrum_csv
+from calibration.yamlio import read_yaml
 from reconstruct.camera import Intrinsics, Pose, read_colmap_text
 from reconstruct.raycast import RayCaster
 from reconstruct.render import render_image
@@ -80,7 +81,7 @@ def load_camera_file(path: Path) -> Camera:
         cid, _, pose = images[min(images)]
         return Camera(cams[cid], pose)
     try:
-        data = yaml.safe_load(path.read_text())
+        data = read_yaml(path, "camera file", "fix the YAML syntax")
         intr = Intrinsics.pinhole(int(data["width"]), int(data["height"]), float(data["focal_px"]))
         up = tuple(data.get("up", (0.0, 0.0, 1.0)))
         pose = Pose.look_at(np.asarray(data["eye"], float), np.asarray(data["target"], float), up)

@@ -18,6 +18,7 @@ from typing import Any
 import yaml
 
 from calibration.errors import RigError
+from calibration.yamlio import load_yaml, yaml_problem
 
 log = logging.getLogger(__name__)
 
@@ -160,9 +161,12 @@ class Session:
                 "give the folder that `rig capture --out` created",
             )
         try:
-            info = yaml.safe_load(meta.read_text(encoding="utf-8")) or {}
-        except yaml.YAMLError as exc:
-            raise RigError(f"{meta} is not valid YAML: {exc}") from exc
+            info = load_yaml(meta.read_text(encoding="utf-8")) or {}
+        except (yaml.YAMLError, UnicodeDecodeError) as exc:
+            problem = yaml_problem(exc) if isinstance(exc, yaml.YAMLError) else "not UTF-8 text"
+            raise RigError(
+                f"{meta} is not valid YAML: {problem}", "fix the file (repeated keys, syntax)"
+            ) from exc
         return cls(root, info, read_manifest(root))
 
     @property

@@ -5,11 +5,16 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import signal
 import sys
+import threading
 from collections.abc import Sequence
+from types import FrameType
+from typing import NoReturn
 
 from rich.console import Console
 from rich.logging import RichHandler
+from rich.text import Text
 
 from calibration.errors import RigError
 from rig import __version__
@@ -30,8 +35,15 @@ COMMANDS: tuple[str, ...] = (
 log = logging.getLogger("rig")
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line (argparse prints the usage block first)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} — see `{self.prog} --help`\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="rig",
         description="Spectral multi-view inverse rendering with an RGB camera and an LED light.",
     )
@@ -63,6 +75,28 @@ def configure_logging(verbosity: int, debug: bool) -> None:
     )
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, handled like Ctrl-C: stages unwind, save their state and the CLI exits 143."""
+
+
+def _terminate(signum: int, frame: FrameType | None) -> None:
+    raise Terminated
+
+
+def handle_sigterm() -> None:
+    """Route SIGTERM to :class:`Terminated`. pycolmap's glog installs a C-level handler on
+    import that prints a native stack dump on SIGTERM; importing it first lets ours replace it."""
+    import pycolmap  # noqa: F401  (its import installs the handler ours must override)
+
+    if threading.current_thread() is threading.main_thread():  # signals go to the main thread
+        signal.signal(signal.SIGTERM, _terminate)
+
+
+def _line(label: str, style: str, message: str) -> Text:
+    """One error line printed literally: `[gphoto2]` or `[/x]` in a message is not markup."""
+    return Text.assemble((label, style), " ", message)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -71,14 +105,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     err = Console(stderr=True, soft_wrap=True)
+    previous = signal.getsignal(signal.SIGTERM)
+    handle_sigterm()
     try:
         result = args.func(args)
         return int(result or 0)
     except RigError as error:
         if args.debug:
             err.print_exception()
-        err.print(f"[bold red]error:[/] {error}", highlight=False, markup=True)
+        err.print(_line("error:", "bold red", str(error)), highlight=False)
         return 2
+    except Terminated:
+        err.print(_line("terminated", "yellow", "(SIGTERM): state saved; run again to resume"))
+        return 143
     except KeyboardInterrupt:
         err.print("[yellow]interrupted[/]")
         return 130
@@ -87,11 +126,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             err.print_exception()
         else:
             err.print(
-                f"[bold red]internal error:[/] {type(error).__name__}: {error} "
-                "— run again with --debug for the traceback and report it",
+                _line(
+                    "internal error:",
+                    "bold red",
+                    f"{type(error).__name__}: {error} "
+                    "— run again with --debug for the traceback and report it",
+                ),
                 highlight=False,
             )
         return 1
+    finally:
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGTERM, previous if previous is not None else signal.SIG_DFL)
 
 
 if __name__ == "__main__":

@@ -18,9 +18,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from calibration.errors import RigError
+from calibration.yamlio import read_yaml
 from reconstruct.board import BoardSpec
 
 DEVICE_KINDS = ("light", "camera", "projector", "spectrometer")
@@ -209,12 +208,9 @@ def resolve_profile(name_or_path: str | Path) -> Path:
 def load_profile(name_or_path: str | Path) -> Profile:
     """Read and validate a profile by shipped name or path."""
     path = resolve_profile(name_or_path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        raise RigError(
-            f"{path} is not valid YAML: {exc}", "fix the YAML syntax (indentation, colons, quotes)"
-        ) from exc
+    data = read_yaml(
+        path, "profile", "fix the YAML syntax (indentation, colons, quotes, repeated keys)"
+    )
     return parse_profile(data, str(path))
 
 
@@ -303,6 +299,7 @@ class _Validator:
         }
         poses = self.choice(top.get("poses", "estimate"), "poses", POSE_MODES)
         sim = self.mapping(top.get("sim", {}), "sim", None)
+        self.sim_trajectory(sim.get("trajectory"))
         if poses == "known" and not any(d.get("driver") == "sim" for d in devices.values()):
             raise self.fail(
                 "poses",
@@ -449,7 +446,7 @@ class _Validator:
                     key, f"is {_show(factors)}", "a list of positive factors, e.g. [0.7, 1.0, 1.3]"
                 )
             trajectory = Trajectory(
-                tuple(self.number(e, "plan.trajectory.elevations_deg") for e in elevations),
+                self.elevations(elevations, "plan.trajectory.elevations_deg"),
                 self.number(tr.get("azimuth_start_deg", 0.0), "plan.trajectory.azimuth_start_deg"),
                 tuple(self.number(f, key, positive=True) for f in factors),
             )
@@ -457,6 +454,37 @@ class _Validator:
         if section.get("projector") is not None:
             placements = self.projector_placements(section["projector"], views, devices)
         return Plan(views, tuple(chosen), ambient, structured, settle, trajectory, placements)
+
+    def elevations(self, values: list[Any], key: str) -> tuple[float, ...]:
+        out = tuple(self.number(e, key) for e in values)
+        if any(abs(e) > 90 for e in out):
+            raise self.fail(key, f"is {_show(values)}", "elevations in degrees within [-90, 90]")
+        return out
+
+    def sim_trajectory(self, value: Any) -> None:
+        """The numbers of ``sim.trajectory`` (the sim checks its keys when it opens; a word
+        where a number belongs would otherwise surface as an internal error)."""
+        if value is None:
+            return
+        key = "sim.trajectory"
+        section = self.mapping(value, key, None)
+        for name in ("radius_m", "free_light_radius_m"):
+            if name in section:
+                self.number(section[name], f"{key}.{name}", positive=True)
+        if "start_azimuth_deg" in section:
+            self.number(section["start_azimuth_deg"], f"{key}.start_azimuth_deg")
+        lists = {"elevations_deg": 0, "distances_m": 0, "target_m": 3, "light_offset_m": 3}
+        for name, length in lists.items():
+            if name not in section:
+                continue
+            items = section[name]
+            if not isinstance(items, list) or (length and len(items) != length):
+                want = f"a list of {length} numbers" if length else "a list of numbers"
+                raise self.fail(f"{key}.{name}", f"is {_show(items)}", want)
+            if name == "elevations_deg":
+                self.elevations(items, f"{key}.{name}")
+            for item in items:
+                self.number(item, f"{key}.{name}", positive=name == "distances_m")
 
     def projector_placements(
         self, value: Any, views: int, devices: Mapping[str, Any]

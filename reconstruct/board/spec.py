@@ -18,6 +18,7 @@ import numpy as np
 import yaml
 
 from calibration.errors import RigError
+from calibration.yamlio import read_yaml
 
 # Sheet sizes (width, height) in metres, portrait.
 PAPER_SIZES_M: dict[str, tuple[float, float]] = {
@@ -60,7 +61,8 @@ class BoardSpec:
                 f"than the square length {self.square_length_m} m",
                 "use a marker about 0.75 of the square",
             )
-        if self.measured_square_length_m is not None and self.measured_square_length_m <= 0:
+        measured = self.measured_square_length_m
+        if measured is not None and not (0 < measured < float("inf")):
             raise RigError(
                 f"measured square length {self.measured_square_length_m} m is not positive",
                 "enter the measured side of one chessboard square",
@@ -266,12 +268,9 @@ class BoardSpec:
 
     @classmethod
     def from_yaml(cls, path: Path) -> BoardSpec:
-        try:
-            data = yaml.safe_load(Path(path).read_text())
-        except FileNotFoundError as exc:
-            raise RigError(f"{path} does not exist", "generate it with `rig board --out`") from exc
-        except yaml.YAMLError as exc:
-            raise RigError(f"{path} is not valid YAML: {exc}", "fix or regenerate it") from exc
+        if not Path(path).exists():
+            raise RigError(f"{path} does not exist", "generate it with `rig board --out`")
+        data = read_yaml(Path(path), "board snippet", "fix or regenerate it with `rig board`")
         return cls.from_dict(data, source=str(path))
 
     def with_measured_square(self, measured_square_m: float) -> BoardSpec:

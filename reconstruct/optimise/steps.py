@@ -17,7 +17,9 @@ import numpy as np
 from calibration.basis import SpectralBasis
 from calibration.errors import RigError
 from calibration.estimation import DEFAULT_SMOOTHNESS, estimate_reflectance
+from reconstruct.config_check import check_types, is_number
 from reconstruct.forward import shading
+from reconstruct.optimise.checkpoint import Checkpoint, OptimiseState
 from reconstruct.optimise.cost import JointCost, Robust
 from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
 from reconstruct.optimise.problem import Frames, LightMode, Observations, Problem, Rig, Weights
@@ -82,6 +84,8 @@ class OptimiseSettings:
         cls, conf: Mapping[str, Any] | None, where: str = "config"
     ) -> OptimiseSettings:
         """Settings from a mapping (YAML); unknown keys are an error naming the key."""
+        if not isinstance(conf or {}, Mapping):
+            raise RigError(f"{where}: the section is {conf!r}", "write it as key: value lines")
         conf = dict(conf or {})
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(conf) - known)
@@ -90,19 +94,29 @@ class OptimiseSettings:
                 f"{where}: unknown optimise setting(s) {', '.join(unknown)}",
                 f"use only {', '.join(sorted(known))}",
             )
-        solver = dict(conf.pop("solver", {}) or {})
+        solver = conf.pop("solver", {}) or {}
+        if not isinstance(solver, Mapping):
+            raise RigError(f"{where}: solver is {solver!r}", "write it as key: value lines")
+        solver = dict(solver)
         sknown = {f.name for f in fields(SolverSettings)}
         if set(solver) - sknown:
             raise RigError(
                 f"{where}: unknown solver setting(s) {', '.join(sorted(set(solver) - sknown))}",
                 f"use only {', '.join(sorted(sknown))}",
             )
-        out = cls(**conf, solver=SolverSettings(**solver))
-        out.gamma = tuple(float(g) for g in out.gamma)  # type: ignore[assignment]
-        if len(out.gamma) != 3 or min(out.gamma) < 0:
+        gamma = conf.pop("gamma", cls.gamma)
+        if (
+            not isinstance(gamma, (list, tuple))
+            or len(gamma) != 3
+            or not all(is_number(g) and g >= 0 for g in gamma)
+        ):
             raise RigError(
-                f"{where}: gamma must be three non-negative numbers", "e.g. [3, 2, 0.01]"
+                f"{where}: gamma is {gamma!r}, not three non-negative numbers", "e.g. [3, 2, 0.01]"
             )
+        check_types(conf, cls(), where, low=0.0, lows={"min_view_cos": -1.0})
+        check_types(solver, SolverSettings(), f"{where} solver", low=0.0)
+        out = cls(**conf, solver=SolverSettings(**solver))
+        out.gamma = tuple(float(g) for g in gamma)  # type: ignore[assignment]
         if out.position_motion not in ("normal", "free"):
             raise RigError(
                 f"{where}: position_motion {out.position_motion!r} is unknown", "use normal or free"
@@ -298,8 +312,11 @@ def optimise(
     inp: OptimiseInput,
     settings: OptimiseSettings | None = None,
     progress: Progress | None = None,
+    checkpoint: Checkpoint | None = None,
 ) -> OptimiseResult:
-    """Run the paper's optimisation steps and return the refined mesh, reflectance and light."""
+    """Run the paper's optimisation steps and return the refined mesh, reflectance and light.
+    With a ``checkpoint`` the state is saved after each stage, and a saved state for the same
+    inputs is resumed after its last completed stage."""
     cfg = settings or OptimiseSettings()
     X = np.array(inp.vertices, dtype=float)
     n_views = inp.rig.n_views
@@ -377,26 +394,53 @@ def optimise(
         )
         return result.theta
 
-    t0 = time.perf_counter()
-    A0 = np.zeros((len(X), nb)) if inp.initial_alpha is None else np.asarray(inp.initial_alpha)
-    problem = build_problem(inp, X, light, cfg)
-    if problem.obs.count == 0:
-        raise RigError(
-            "no vertex is observed in any frame (all outside the images, saturated or shadowed)",
-            "check the poses and the initial mesh, and the exposure of the captures",
-        )
-    theta = problem.pack(X, A0, light)
-    if inp.initial_alpha is None:
-        A0 = initial_reflectance(problem, theta, inp.basis, cfg.init_smoothness)
-        theta = problem.pack(X, A0, light)
-    seconds["setup"] = time.perf_counter() - t0
+    last_outer = cfg.outer_iterations if cfg.optimise_positions else 0
     free_light = cfg.light_mode != "fixed"
     X0 = X.copy()
     scale0 = edge_scale(X0, adjacency(inp.faces, len(X0)))
-    theta = run(
-        "light", 0, problem, theta, problem.mask(False, True, free_light), cfg.light_iterations
-    )
-    for outer in range(1, cfg.outer_iterations + 1 if cfg.optimise_positions else 1):
+
+    def save(stage: int, done: bool, theta: np.ndarray, problem: Problem) -> None:
+        if checkpoint is None:
+            return
+        X, A, light = problem.unpack(theta)
+        checkpoint.save(
+            OptimiseState(
+                stage, done or stage >= last_outer, X, A, light, A0,
+                problem.obs.per_vertex > 0, problem.obs.count, history, seconds,
+            )
+        )
+
+    state = checkpoint.load() if checkpoint is not None else None
+    if state is not None:
+        log.info("resuming the optimisation after stage %d (%s)", state.stage, checkpoint)
+        history[:], A0 = state.history, state.initial_alpha
+        seconds.update(state.seconds)
+        if state.done:
+            return _result(inp, cfg, state.vertices, state.alpha, state.light, state, A0, history)
+        problem = build_problem(inp, state.vertices, state.light, cfg)
+        theta = problem.pack(state.vertices, state.alpha, state.light)
+        first_outer = state.stage + 1
+    else:
+        t0 = time.perf_counter()
+        A0 = np.zeros((len(X), nb)) if inp.initial_alpha is None else np.asarray(inp.initial_alpha)
+        problem = build_problem(inp, X, light, cfg)
+        if problem.obs.count == 0:
+            raise RigError(
+                "no vertex is observed in any frame (all outside the images, saturated or "
+                "shadowed)",
+                "check the poses and the initial mesh, and the exposure of the captures",
+            )
+        theta = problem.pack(X, A0, light)
+        if inp.initial_alpha is None:
+            A0 = initial_reflectance(problem, theta, inp.basis, cfg.init_smoothness)
+            theta = problem.pack(X, A0, light)
+        seconds["setup"] = time.perf_counter() - t0
+        theta = run(
+            "light", 0, problem, theta, problem.mask(False, True, free_light), cfg.light_iterations
+        )
+        save(0, False, theta, problem)
+        first_outer = 1
+    for outer in range(first_outer, last_outer + 1):
         t0 = time.perf_counter()
         X_prev, _, light_prev = problem.unpack(theta)
         X_prev, light_prev = X_prev.copy(), light_prev.copy()
@@ -419,9 +463,27 @@ def optimise(
         light_moved = float(np.max(np.linalg.norm(light_new - light_prev, axis=1)))
         tol = cfg.settle_position * float(np.mean(problem.weights.scale))
         log.info("outer %d: vertices moved ≤ %.3g m, light ≤ %.3g m", outer, moved, light_moved)
-        if moved <= tol and light_moved <= cfg.settle_light_m:
+        settled = moved <= tol and light_moved <= cfg.settle_light_m
+        save(outer, settled, theta, problem)
+        if settled:
             break
     X, A, light = problem.unpack(theta)
+    final = OptimiseState(
+        0, True, X, A, light, A0, problem.obs.per_vertex > 0, problem.obs.count, history, seconds
+    )
+    return _result(inp, cfg, X, A, light, final, A0, history)
+
+
+def _result(
+    inp: OptimiseInput,
+    cfg: OptimiseSettings,
+    X: np.ndarray,
+    A: np.ndarray,
+    light: np.ndarray,
+    state: OptimiseState,
+    A0: np.ndarray,
+    history: list[dict[str, Any]],
+) -> OptimiseResult:
     return OptimiseResult(
         vertices=X.copy(),
         faces=np.asarray(inp.faces),
@@ -429,9 +491,9 @@ def optimise(
         reflectance=inp.basis.reconstruct(A),
         light=light.copy(),
         light_positions=light_positions(inp.rig, cfg.light_mode, light),
-        observed=problem.obs.per_vertex > 0,
-        n_observations=problem.obs.count,
+        observed=state.observed,
+        n_observations=state.n_observations,
         history=history,
-        stage_seconds=seconds,
+        stage_seconds=state.seconds,
         initial_alpha=A0,
     )

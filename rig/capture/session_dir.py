@@ -15,6 +15,7 @@ from typing import Any
 import yaml
 
 from calibration.errors import RigError
+from calibration.yamlio import load_yaml
 from reconstruct.session import (
     CALIBRATION_DIR,
     MANIFEST_FILE,
@@ -67,7 +68,7 @@ def write_info(session_dir: Path, info: dict[str, Any]) -> None:
 def read_info(session_dir: Path) -> dict[str, Any]:
     path = session_dir / SESSION_FILE
     try:
-        info = yaml.safe_load(path.read_text(encoding="utf-8"))
+        info = load_yaml(path.read_text(encoding="utf-8"))
     except (OSError, yaml.YAMLError) as exc:
         raise RigError(
             f"{path} cannot be read ({exc})",

@@ -15,6 +15,7 @@ from calibration.errors import RigError
 from reconstruct.board import PAPER_SIZES_M, BoardSpec, write_sheet
 from reconstruct.board.spec import DEFAULT_DICTIONARY, DEFAULT_MARKER_RATIO, DEFAULT_SQUARES
 from reconstruct.session import write_bytes_atomically
+from rig.outpaths import output_file
 
 
 def _squares(text: str) -> tuple[int, int]:
@@ -22,6 +23,10 @@ def _squares(text: str) -> tuple[int, int]:
         sx, sy = (int(v) for v in text.lower().split("x"))
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"{text!r} is not COLUMNSxROWS, e.g. 7x5") from exc
+    if min(sx, sy) < 2:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: a ChArUco board needs at least 2 squares each way, e.g. 7x5"
+        )
     return sx, sy
 
 
@@ -85,6 +90,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     console = Console(soft_wrap=True)
     measured = None if args.measured_square_mm is None else args.measured_square_mm / 1000
+    if args.snippet is not None:
+        output_file(args.snippet, "--snippet")
     if args.out is None:
         if args.snippet is None or measured is None:
             raise RigError(
@@ -99,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
             f"(designed {spec.square_length_m * 1000:g} mm, print scale {spec.scale:.4f})"
         )
         return 0
+    output_file(args.out, "--out")
+    output_file(args.snippet or args.out.with_suffix(".yaml"), "--snippet")
     spec = BoardSpec.fit_paper(
         paper=args.size,
         squares=args.squares,

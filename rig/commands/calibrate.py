@@ -17,6 +17,7 @@ from rich.table import Table
 
 from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID
+from rig.outpaths import output_dir, output_file
 
 if TYPE_CHECKING:
     from calibration.store import CalibrationStore
@@ -30,7 +31,7 @@ console = Console()
 def _store_root(args: argparse.Namespace) -> Path:
     from calibration.store import default_store_path
 
-    return Path(args.store) if args.store else default_store_path()
+    return output_dir(Path(args.store), "--store") if args.store else default_store_path()
 
 
 def _store(args: argparse.Namespace, *, must_exist: bool = True) -> CalibrationStore:
@@ -82,6 +83,7 @@ def cmd_show(args: argparse.Namespace) -> int:
     peaks = ", ".join(f"{c} {w[np.argmax(v[:, j])]:g} nm" for j, c in enumerate(entry.columns))
     console.print(f"  peak: {peaks}")
     path = Path(args.plot) if args.plot else Path(f"{_slug(entry.name)}.v{entry.version}.png")
+    output_file(path, "--plot")
     plot_spectrum(w, v, entry.columns, f"{entry.name} v{entry.version} ({entry.kind})", path)
     console.print(f"plot written to {path}")
     return 0
@@ -103,7 +105,7 @@ def cmd_remove(args: argparse.Namespace) -> int:
 def cmd_init_store(args: argparse.Namespace) -> int:
     from calibration.store import CalibrationStore
 
-    root = Path(args.dir) if args.dir else _store_root(args)
+    root = output_dir(Path(args.dir), "DIR") if args.dir else _store_root(args)
     store = CalibrationStore.create_default(root)
     console.print(f"wrote default calibration store to {store.root}:")
     for e in store.entries():
@@ -160,6 +162,9 @@ def cmd_basis(args: argparse.Namespace) -> int:
     from calibration.plots import plot_basis
     from calibration.spectra import resample
 
+    output_file(Path(args.plot), "--plot")
+    if args.out:
+        output_file(Path(args.out), "--out")
     if args.from_file:
         _, w, values = read_reflectance_set(args.from_file)
         refl = resample(w, values.T, DEFAULT_GRID, source=str(args.from_file)).T
@@ -246,6 +251,8 @@ def cmd_select(args: argparse.Namespace) -> int:
     from calibration.selection import rank_illumination_sets
     from calibration.spectra import resample
     from calibration.store import CalibrationStore
+
+    output_file(Path(args.plot), "--plot")
 
     if args.top < 1:
         raise RigError(f"--top {args.top} must be at least 1", "give the number of rows to show")

@@ -10,6 +10,7 @@ from rich.console import Console
 
 from calibration.errors import RigError
 from rig.capture import CaptureStopped, run_capture
+from rig.outpaths import output_dir
 from rig.profile import shipped_profiles
 
 
@@ -47,6 +48,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def handle(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
     session = args.resume if args.resume is not None else args.out
+    output_dir(session, "--resume" if args.resume is not None else "--out")
     profile = args.profile if args.profile is not None or args.resume else "sim"
     try:
         out = run_capture(

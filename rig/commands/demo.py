@@ -25,6 +25,7 @@ from reconstruct.pipeline import run_reconstruction
 from reconstruct.poses import SUMMARY as POSE_SUMMARY
 from rig.capture import run_capture
 from rig.commands.reconstruct import ProgressPrinter
+from rig.outpaths import output_dir
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -59,7 +60,7 @@ def demo_profile(views: int) -> dict[str, Any]:
 def handle(args: argparse.Namespace) -> int:
     if args.views < 6:
         raise RigError(f"--views {args.views} is too few", "use at least 6 views (default 20)")
-    out = Path(args.out).expanduser().resolve()
+    out = output_dir(Path(args.out), "--out").resolve()
     session = out / "session"
     if session.exists():
         raise RigError(f"{session} already exists", "choose another --out or remove the folder")

@@ -8,9 +8,13 @@ from pathlib import Path
 
 from rich.console import Console
 from rich.table import Table
+from rich.text import Text
 
+from calibration.errors import RigError
 from reconstruct.optimise.solver import IterationRecord
 from reconstruct.pipeline import Reconstruction, load_config, run_reconstruction
+from reconstruct.run_status import describe, read_status
+from reconstruct.session import RECON_DIR
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -31,6 +35,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         type=Path,
         default=None,
         help="YAML with sections decode, poses, mesh, procam, visibility, subdivide, optimise",
+    )
+    parser.add_argument(
+        "--status",
+        action="store_true",
+        help="print the state of the last run on SESSION (running, complete, failed, "
+        "interrupted) and exit",
     )
     parser.set_defaults(func=handle)
 
@@ -82,10 +92,35 @@ def summary(console: Console, rec: Reconstruction) -> None:
     console.print(table)
 
 
+# Exit status of a reconstruction that finished without some unusable frames (corrupt or
+# changed RAW files, skipped by decode.on_bad_frame: skip): the outputs are written, but the
+# caller (a script, a batch of sessions) must not take the run as clean.
+EXIT_SKIPPED_FRAMES = 3
+
+
 def handle(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
+    if args.status:
+        print(describe(read_status(Path(args.session) / RECON_DIR)))
+        return 0
+    if args.initial_mesh is not None and not args.initial_mesh.is_file():
+        raise RigError(
+            f"--initial-mesh {args.initial_mesh} is not a file", "give a PLY, OBJ, STL, OFF or GLB"
+        )
     config = load_config(args.config)
     rec = run_reconstruction(args.session, config, args.initial_mesh, ProgressPrinter(console))
     summary(console, rec)
     print(rec.recon_dir)
+    skipped = rec.report["skipped_frames"]
+    if skipped:
+        listed = "; ".join(f"{name}: {why}" for name, why in sorted(skipped.items()))
+        console.print(
+            Text.assemble(
+                ("warning:", "bold yellow"),
+                f" {len(skipped)} frame(s) were unusable and left out ({listed}) — recapture "
+                "or restore them and run again, or set decode.on_bad_frame: stop to refuse",
+            ),
+            soft_wrap=True,
+        )
+        return EXIT_SKIPPED_FRAMES
     return 0

@@ -14,6 +14,7 @@ from reconstruct import export
 from reconstruct.poses import load as load_poses
 from reconstruct.relight import Camera, encode_srgb, load_camera_file, relight, write_png
 from reconstruct.session import RECON_DIR
+from rig.outpaths import output_file
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -56,10 +57,19 @@ def parse_xyz(text: str, what: str) -> np.ndarray:
         ) from error
     if v.shape != (3,):
         raise RigError(f"{what} {text!r} has {v.size} numbers", "give three numbers: x,y,z")
+    if not np.all(np.isfinite(v)):
+        raise RigError(f"{what} {text!r} is not finite", "give three finite numbers in metres")
     return v
 
 
 def handle(args: argparse.Namespace) -> int:
+    # Every argument is checked before the reconstruction is read.
+    if args.out is not None:
+        output_file(args.out, "--out")
+    if not (np.isfinite(args.exposure) and args.exposure > 0):
+        raise RigError(f"--exposure {args.exposure} is not positive", "give e.g. 0.8")
+    position = None if args.light_pos is None else parse_xyz(args.light_pos, "--light-pos")
+    file_camera = None if args.camera is None else load_camera_file(args.camera)
     recon = Path(args.session) / RECON_DIR
     data = export.read_reflectance_npz(recon / export.REFLECTANCE_FILE)
     report_path = recon / export.REPORT_FILE
@@ -67,7 +77,7 @@ def handle(args: argparse.Namespace) -> int:
         raise RigError(f"{report_path} is missing", f"run `rig reconstruct {args.session}` first")
     report = json.loads(report_path.read_text())
     light = report["light"]
-    if args.view is not None:
+    if file_camera is None:
         intr, poses, _ = load_poses(recon / "poses")
         views = sorted(poses)
         if args.view not in poses:
@@ -79,13 +89,13 @@ def handle(args: argparse.Namespace) -> int:
         default_light = np.asarray(light["positions_m"][views.index(args.view)])
         name = f"view{args.view:03d}"
     else:
-        camera = load_camera_file(args.camera)
+        camera = file_camera
         if light.get("offset_m") is not None:
             default_light = camera.pose.light_position(np.asarray(light["offset_m"]))
         else:
             default_light = camera.pose.center
         name = args.camera.stem
-    position = default_light if args.light_pos is None else parse_xyz(args.light_pos, "--light-pos")
+    position = default_light if position is None else position
     image = relight(
         np.asarray(data["vertices"], float),
         np.asarray(data["faces"]),
