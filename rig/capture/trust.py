@@ -1,6 +1,7 @@
 """Resuming opens the devices of the session's own profile snapshot, and a session folder may
 come from someone else: a ``subprocess`` transport in it would run a program named by that
-folder. Such devices are opened only after the person confirms (or with an explicit flag)."""
+folder (a ``record:`` would write where it says). Such devices are opened only after the
+person confirms (or with an explicit flag)."""
 
 from __future__ import annotations
 
@@ -17,7 +18,8 @@ TRUST_FLAG = "--trust-session-devices"
 
 
 def session_programs(profile: Profile) -> list[str]:
-    """``devices.KIND: command`` for every device whose transport runs a program."""
+    """What opening the snapshot's devices would do beyond talking to a device: run a
+    program (``subprocess`` transport) or write a file (``record:``)."""
     found = []
     for kind in ("camera", "light", "projector", "spectrometer"):
         spec = profile.device(kind) or {}
@@ -28,6 +30,8 @@ def session_programs(profile: Profile) -> list[str]:
             command = transport.get("command")
             shown = " ".join(map(str, command)) if isinstance(command, list) else str(command)
             found.append(f"devices.{kind} runs `{shown}`")
+        if transport.get("record"):  # a log written wherever the snapshot says
+            found.append(f"devices.{kind} writes {transport['record']}")
     return found
 
 
@@ -43,7 +47,7 @@ def confirm_session_devices(
     fix = f"check that command, then resume with {TRUST_FLAG}"
     if ask is None or not interactive:
         raise RigError(f"{where} (a program from the session's device snapshot)", fix)
-    answer = ask(f"{where}. Resuming runs this program. Run it? [y/N] ")
+    answer = ask(f"{where}. Resuming does this. Go ahead? [y/N] ")
     if answer.strip().lower() not in ("y", "yes"):
         raise RigError(f"{where}: not confirmed, nothing was run", fix)
 
