@@ -64,7 +64,7 @@ def read_info(session_dir: Path) -> dict[str, Any]:
     path = session_dir / SESSION_FILE
     try:
         info = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError) as exc:
+    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
         raise RigError(
             f"{path} cannot be read ({exc})",
             "restore it from a backup; the frames in raw/ are intact",
