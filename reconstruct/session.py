@@ -119,7 +119,7 @@ def read_manifest(session_dir: Path, n_views: int | None = None) -> list[FrameRe
         try:
             data = json.loads(line.decode("utf-8"))
         except UnicodeDecodeError as exc:
-            if number >= len(lines) - 1:  # last line, not newline-terminated: torn write
+            if number == len(lines):  # last line, not newline-terminated: torn write
                 log.warning("%s: ignoring the torn last line %d", path, number)
                 continue
             raise RigError(
@@ -128,7 +128,7 @@ def read_manifest(session_dir: Path, n_views: int | None = None) -> list[FrameRe
                 "`rig session verify`",
             ) from exc
         except json.JSONDecodeError as exc:
-            if number >= len(lines) - 1:  # last line, not newline-terminated: torn write
+            if number == len(lines):  # last line, not newline-terminated: torn write
                 log.warning("%s: ignoring the torn last line %d", path, number)
                 continue
             raise RigError(

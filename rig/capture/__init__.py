@@ -71,10 +71,10 @@ def run_capture(
             console.print("[dim]resuming with the session's own profile snapshot[/]")
         profile = snapshot_profile(out)
         seed = int(info.get("seed", 0)) if seed is None else seed
-        records = prepare_resume(out, _recorded_plan(profile, info), _warner(console))
         confirm_session_devices(
             out, profile, trusted=trust_devices, ask=prompt, interactive=interactive
         )
+        records = prepare_resume(out, _recorded_plan(profile, info), _warner(console))
     else:
         if profile is None:
             raise RigError(

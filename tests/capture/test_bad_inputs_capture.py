@@ -92,6 +92,12 @@ def raw_line(data: bytes, at: int = 3) -> Callable[[Path], None]:
     return edit
 
 
+def garbage_last_line(session: Path) -> None:
+    """A complete (newline-ended) bad last line is no torn write: it is reported, not skipped."""
+    manifest = session / "manifest.jsonl"
+    manifest.write_bytes(manifest.read_bytes() + b"garbage\n")
+
+
 def duplicate_line(session: Path) -> None:
     manifest = session / "manifest.jsonl"
     manifest.write_bytes(manifest.read_bytes() + manifest.read_bytes().splitlines(True)[0])
@@ -184,6 +190,9 @@ MANIFEST_CASES = [
         (LINE, "`other_files`"),
     ),
     Case("extra not an object", verify_after(edit_line("extra", [1])), 2, (LINE, "`extra`")),
+    Case(
+        "complete bad last line", resume_after(garbage_last_line), 2, ("line 9 is not valid JSON",)
+    ),
     Case("frame listed twice", resume_after(duplicate_line), 2, ("lists frame 0 twice",)),
     Case("frame listed twice (verify)", verify_after(duplicate_line), 1, ("duplicate", "frame 0")),
     Case(
