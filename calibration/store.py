@@ -172,8 +172,29 @@ class CalibrationStore:
                     f"and provenance of type {type(entry.provenance).__name__}",
                     "the version must be a whole number and the provenance a mapping",
                 )
+            self._confine(entry)
             entries.append(entry)
         return entries
+
+    def _confine(self, entry: Entry) -> None:
+        """An entry's ``file:`` must name a file inside the store, so reading a foreign store,
+        snapshotting it into a session or `rig calibrate remove` never reaches outside it
+        (no absolute path, no ``..``, no symlink leading out)."""
+        file = entry.file
+        inside = isinstance(file, str) and bool(file) and "\x00" not in file
+        if inside:
+            rel = Path(file)
+            inside = not rel.is_absolute() and ".." not in rel.parts and "\\" not in file
+        if inside:
+            root = self.root.resolve()
+            inside = (root / file).resolve().is_relative_to(root)
+        if not inside:
+            raise RigError(
+                f"{self.index_path}: entry {entry.name!r} v{entry.version} has "
+                f"file: {file!r}, which is not a file inside the store",
+                "entries name files under lights/ or cameras/ of the store; restore "
+                "index.yaml from a backup or a session's calibration/ snapshot",
+            )
 
     def _write_index(self) -> None:
         self.root.mkdir(parents=True, exist_ok=True)

@@ -69,7 +69,14 @@ def _transport_section(options: dict[str, Any]) -> dict[str, Any]:
 
 
 def _transport(driver: str, options: dict[str, Any]) -> Transport:
-    spec = {**DEFAULT_TRANSPORTS.get(driver, {}), **_transport_section(options)}
+    """The profile's transport over the driver's default; the defaults (a baud rate, a VID)
+    apply only to the default's own type, so e.g. a ``subprocess`` bridge can replace the
+    serial port of any light."""
+    given = _transport_section(options)
+    default = DEFAULT_TRANSPORTS.get(driver, {})
+    if given.get("type", default.get("type")) != default.get("type"):
+        default = {}
+    spec = {**default, **given}
     if "type" not in spec:
         raise RigError(f"driver {driver} needs a `transport:` section", "see docs/usage-drivers.md")
     return open_transport(spec, where=f"{driver}.transport")

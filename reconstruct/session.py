@@ -19,6 +19,7 @@ import yaml
 
 from calibration.errors import RigError
 from calibration.yamlio import load_yaml, yaml_problem
+from reconstruct.manifest_check import check_line
 
 log = logging.getLogger(__name__)
 
@@ -48,10 +49,15 @@ class FrameRecord:
         return json.dumps(asdict(self), sort_keys=True)
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any], where: str) -> FrameRecord:
+    def from_dict(
+        cls, data: dict[str, Any], where: str, n_views: int | None = None
+    ) -> FrameRecord:
+        if not isinstance(data, dict):
+            check_line(data, where)
         missing = [k for k in cls.__dataclass_fields__ if k not in data and k != "extra"]
         if missing:
             raise RigError(f"{where} lacks {', '.join(missing)}", "the manifest line is malformed")
+        check_line(data, where, n_views)
         known = {k: data[k] for k in cls.__dataclass_fields__ if k in data}
         extra = {k: v for k, v in data.items() if k not in cls.__dataclass_fields__}
         known.setdefault("extra", {})
@@ -99,21 +105,31 @@ def append_manifest(session_dir: Path, record: FrameRecord) -> None:
         os.fsync(handle.fileno())
 
 
-def read_manifest(session_dir: Path) -> list[FrameRecord]:
-    """All complete manifest lines. A torn last line (a kill mid-append) is ignored with a
-    warning — its frame is simply captured again on resume."""
+def read_manifest(session_dir: Path, n_views: int | None = None) -> list[FrameRecord]:
+    """All complete manifest lines, each checked (``n_views``: the plan's, bounds ``view``).
+    A torn last line (a kill mid-append) is ignored with a warning — its frame is simply
+    captured again on resume."""
     path = session_dir / MANIFEST_FILE
     if not path.is_file():
         return []
     records: list[FrameRecord] = []
-    lines = path.read_text(encoding="utf-8").split("\n")
+    lines = path.read_bytes().split(b"\n")
     for number, line in enumerate(lines, 1):
         if not line.strip():
             continue
         try:
-            data = json.loads(line)
+            data = json.loads(line.decode("utf-8"))
+        except UnicodeDecodeError as exc:
+            if number == len(lines):  # last line, not newline-terminated: torn write
+                log.warning("%s: ignoring the torn last line %d", path, number)
+                continue
+            raise RigError(
+                f"{path} line {number} is not text (byte {exc.start}: binary data)",
+                "restore the manifest from a backup or remove that line and run "
+                "`rig session verify`",
+            ) from exc
         except json.JSONDecodeError as exc:
-            if number >= len(lines) - 1:  # last line, not newline-terminated: torn write
+            if number == len(lines):  # last line, not newline-terminated: torn write
                 log.warning("%s: ignoring the torn last line %d", path, number)
                 continue
             raise RigError(
@@ -121,7 +137,7 @@ def read_manifest(session_dir: Path) -> list[FrameRecord]:
                 "restore the manifest from a backup or remove that line and run "
                 "`rig session verify`",
             ) from exc
-        records.append(FrameRecord.from_dict(data, f"{path} line {number}"))
+        records.append(FrameRecord.from_dict(data, f"{path} line {number}", n_views))
     return records
 
 

@@ -81,7 +81,12 @@ def _read_tiff(path: Path) -> ExifInfo:
         def get(name: str) -> Any:
             return tags[name].value if name in tags else None
 
-        iso = exif.get("ISOSpeedRatings") or exif.get("PhotographicSensitivity")
+        # TIFF/EP (and DNGs written that way) may keep exposure and ISO in IFD0 itself
+        iso = (
+            exif.get("ISOSpeedRatings")
+            or exif.get("PhotographicSensitivity")
+            or get("ISOSpeedRatings")
+        )
         if isinstance(iso, tuple):
             iso = iso[0] if iso else None
         return ExifInfo(
@@ -91,7 +96,7 @@ def _read_tiff(path: Path) -> ExifInfo:
                 exif.get("OffsetTimeOriginal"),
             )
             or _time(get("DateTime")),
-            exposure_s=_ratio(exif.get("ExposureTime")),
+            exposure_s=_ratio(exif.get("ExposureTime") or get("ExposureTime")),
             iso=float(iso) if iso else None,
             serial=_text(exif.get("BodySerialNumber") or get("CameraSerialNumber")),
             model=_text(get("Model")),

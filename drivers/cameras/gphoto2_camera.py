@@ -121,7 +121,10 @@ class Gphoto2Camera:
         if port:
             ports = self.gp.PortInfoList()
             ports.load()
-            index = ports.lookup_path(port)
+            try:
+                index = ports.lookup_path(port)
+            except self.gp.GPhoto2Error:  # python-gphoto2 raises where libgphoto2 returns < 0
+                index = -1
             if index < 0:
                 raise RigError(f"no camera port {port!r}", "run `rig devices` to list camera ports")
             self.camera.set_port_info(ports[index])
@@ -199,6 +202,7 @@ class Gphoto2Camera:
                     ) from error
                 continue
             try:
+                _check_choice(self.gp, widget, str(value))
                 widget.set_value(str(value))
             except self.gp.GPhoto2Error as error:
                 choices = ", ".join(str(c) for c in widget.get_choices()) if required else ""
@@ -338,3 +342,11 @@ def _format_choice(choices: list[str], wanted: str) -> str | None:
             return choice
     plain = [c for c in choices if wanted.lower() in c.lower() and "+" not in c]
     return plain[0] if len(plain) == 1 else None
+
+
+def _check_choice(gp: Any, widget: Any, value: str) -> None:
+    """A radio/menu value must be one of the widget's choices: some cameras (and libgphoto2's
+    virtual one) store anything they are given and then shoot with the old setting."""
+    if widget.get_type() in (gp.GP_WIDGET_RADIO, gp.GP_WIDGET_MENU):
+        if value not in [str(c) for c in widget.get_choices()]:
+            raise gp.GPhoto2Error(gp.GP_ERROR_BAD_PARAMETERS)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import select
+import sys
 import threading
 import tty
 from collections.abc import Iterator, Sequence
@@ -106,3 +107,21 @@ def serve_pty(emulator: RgbcwEmulator | None = None) -> Iterator[tuple[str, Rgbc
         thread.join(timeout=2)
         os.close(master)
         os.close(slave)
+
+
+def serve_stdio(emulator: RgbcwEmulator | None = None) -> None:
+    """Answer on stdin/stdout until stdin closes: a light behind the ``subprocess`` transport
+    (``command: [python, -m, drivers.lights.rgbcw_emulator]``), for trying a bridge setup."""
+    emulator = emulator or RgbcwEmulator()
+    out = sys.stdout.buffer
+    out.write(b"READY\n")
+    out.flush()
+    for raw in sys.stdin.buffer:
+        reply = emulator.respond(raw.decode("ascii", errors="replace"))
+        if reply:
+            out.write(reply.encode("ascii") + b"\n")
+            out.flush()
+
+
+if __name__ == "__main__":
+    serve_stdio()

@@ -65,7 +65,14 @@ class SubprocessTransport(Transport):
         if not ready:
             return b""
         data = os.read(fd, size)
-        if not data:
+        if not data:  # end of output: the helper exits (give it a moment to be reaped)
+            try:
+                self._proc.wait(timeout=self.timeout_s)
+            except subprocess.TimeoutExpired:
+                raise RigError(
+                    f"helper program `{self.address}` closed its output",
+                    "run it by hand to see why",
+                ) from None
             self._check_alive()
         return data
 

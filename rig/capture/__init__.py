@@ -8,11 +8,13 @@ from pathlib import Path
 from typing import Any
 
 from rich.console import Console
+from rich.markup import escape
 
 from calibration.errors import RigError
 from reconstruct.session import POSES_DIR, SESSION_FILE, FrameRecord
 from rig.capture.devices import Ask, RigDevices, open_devices
 from rig.capture.engine import CaptureStopped, RunEngine, RunState
+from rig.capture.resume import prepare_resume
 from rig.capture.session_dir import (
     FORMAT_VERSION,
     GROUND_TRUTH_DIR,
@@ -20,14 +22,14 @@ from rig.capture.session_dir import (
     discard_unstarted_session,
     new_session_dir,
     now,
-    prepare_resume,
     read_info,
     snapshot_calibration,
     snapshot_profile,
     software_versions,
     write_info,
 )
-from rig.plans import frame_list
+from rig.capture.trust import confirm_session_devices, stdin_is_tty
+from rig.plans import FrameSpec, frame_list
 from rig.profile import Profile, load_profile
 
 __all__ = ["CaptureStopped", "DeviceFactory", "run_capture"]
@@ -47,16 +49,19 @@ def run_capture(
     open_rig: DeviceFactory = open_devices,
     on_frame: Callable[[FrameRecord], None] | None = None,
     notes: str = "",
+    trust_devices: bool = False,
 ) -> Path:
     """Capture (or with ``resume`` continue) a session into ``out_dir`` and return it.
 
     ``yes`` runs without prompts (sim, automation); ``ask`` replaces the console prompt;
     ``open_rig`` replaces device opening (tests, other front ends); ``notes`` go into
-    session.yaml (object, operator, conditions). Raises
+    session.yaml (object, operator, conditions); ``trust_devices`` lets a resume open
+    devices whose snapshot runs a program without asking (rig.capture.trust). Raises
     :class:`CaptureStopped` when the person stops, RigError on any failure — in both cases
     every completed frame is on disk and ``resume=True`` continues where it stopped."""
     out = Path(out_dir).expanduser().resolve()
     console = console or Console(stderr=True)
+    interactive = ask is not None or stdin_is_tty()
     if not yes and ask is None:
         ask = console.input
     prompt = None if yes else ask
@@ -66,7 +71,10 @@ def run_capture(
             console.print("[dim]resuming with the session's own profile snapshot[/]")
         profile = snapshot_profile(out)
         seed = int(info.get("seed", 0)) if seed is None else seed
-        records = prepare_resume(out)
+        confirm_session_devices(
+            out, profile, trusted=trust_devices, ask=prompt, interactive=interactive
+        )
+        records = prepare_resume(out, _recorded_plan(profile, info), _warner(console))
     else:
         if profile is None:
             raise RigError(
@@ -134,6 +142,16 @@ def run_capture(
         devices.close()
     console.print(f"[green]capture complete:[/] {len(state.done)} frames in {out}")
     return out
+
+
+def _recorded_plan(profile: Profile, info: dict[str, Any]) -> list[FrameSpec]:
+    """The session's frames as planned when it started (before any device is opened)."""
+    size = (info.get("plan") or {}).get("projector_size")
+    return frame_list(profile.plan, tuple(size) if size else None)
+
+
+def _warner(console: Console) -> Callable[[str], None]:
+    return lambda text: console.print(f"[yellow]resume:[/] {escape(text)}", highlight=False)
 
 
 def _start_session(

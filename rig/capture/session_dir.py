@@ -1,11 +1,10 @@
-"""The capture side of the session directory: create it, snapshot what the run depends on
-(profile, calibration, software, devices) and prepare a resume (manifest repair, orphans)."""
+"""The capture side of the session directory: create it and snapshot what the run depends
+on (profile, calibration, software, devices); rig.capture.resume prepares a resume."""
 
 from __future__ import annotations
 
 import datetime as dt
 import importlib
-import os
 import platform
 import shutil
 import sys
@@ -22,13 +21,10 @@ from reconstruct.session import (
     POSES_DIR,
     RAW_DIR,
     SESSION_FILE,
-    FrameRecord,
-    fsync_dir,
-    read_manifest,
     write_bytes_atomically,
 )
 from rig import __version__
-from rig.capture.frames import INCOMING, record_paths
+from rig.capture.frames import INCOMING
 from rig.profile import CalibrationChoice, Profile, parse_profile
 
 FORMAT_VERSION = 1
@@ -69,7 +65,7 @@ def read_info(session_dir: Path) -> dict[str, Any]:
     path = session_dir / SESSION_FILE
     try:
         info = load_yaml(path.read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError) as exc:
+    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
         raise RigError(
             f"{path} cannot be read ({exc})",
             "restore it from a backup; the frames in raw/ are intact",
@@ -170,50 +166,3 @@ def snapshot_calibration(
     if choice.store != "default":
         store.copy_to(dest)
     return {"store": choice.store, "snapshot": CALIBRATION_DIR, **entries}
-
-
-def prepare_resume(session_dir: Path) -> list[FrameRecord]:
-    """Make the session safe to append to and return its complete frames.
-
-    A torn last manifest line (a kill mid-append) is cut off so the next line starts on its
-    own; files in raw/ that no manifest line owns are orphans of an interrupted frame and are
-    deleted (their frames are captured again)."""
-    _truncate_torn_line(session_dir / MANIFEST_FILE)
-    records = read_manifest(session_dir)
-    seen: set[int] = set()
-    for record in records:
-        if record.frame in seen:
-            raise RigError(
-                f"{session_dir / MANIFEST_FILE} lists frame {record.frame} twice",
-                "the manifest was edited by hand; restore it from a backup",
-            )
-        seen.add(record.frame)
-    owned = {p for r in records for p in record_paths(r)}
-    raw = session_dir / RAW_DIR
-    (raw / INCOMING).mkdir(parents=True, exist_ok=True)
-    for file in raw.iterdir():
-        if file.is_file() and f"{RAW_DIR}/{file.name}" not in owned:
-            file.unlink()
-    shutil.rmtree(raw / INCOMING)
-    (raw / INCOMING).mkdir()
-    missing = [r for r in records if not all((session_dir / p).is_file() for p in record_paths(r))]
-    if missing:
-        raise RigError(
-            f"{len(missing)} frame(s) in the manifest are missing from raw/ "
-            f"(first: frame {missing[0].frame}, {missing[0].path})",
-            f"restore them, or run `rig session verify {session_dir}` for the list",
-        )
-    return records
-
-
-def _truncate_torn_line(path: Path) -> None:
-    if not path.is_file():
-        return
-    data = path.read_bytes()
-    if not data or data.endswith(b"\n"):
-        return
-    with open(path, "rb+") as handle:
-        handle.truncate(data.rfind(b"\n") + 1)
-        handle.flush()
-        os.fsync(handle.fileno())
-    fsync_dir(path.parent)

@@ -42,6 +42,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="run `rig reconstruct` on the session when the capture ends",
     )
+    parser.add_argument(
+        "--trust-session-devices",
+        action="store_true",
+        help="on --resume, open devices whose session snapshot runs a program "
+        "(subprocess transport) without asking",
+    )
     parser.set_defaults(func=handle)
 
 
@@ -59,6 +65,7 @@ def handle(args: argparse.Namespace) -> int:
             seed=args.seed,
             console=console,
             notes=args.note,
+            trust_devices=args.trust_session_devices,
         )
     except CaptureStopped as stopped:
         console.print(f"[yellow]{stopped}[/]", highlight=False)

@@ -11,7 +11,8 @@ from typing import Any
 from rich.console import Console
 
 from reconstruct.session import FrameProblem, Session, sha256_file, verify_frames
-from rig.capture.frames import record_paths
+from rig.capture.frames import INCOMING, record_paths
+from rig.capture.resume import QUARANTINE_DIR, REASONS_FILE
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -45,10 +46,13 @@ def handle_verify(args: argparse.Namespace) -> int:
         console.print(f"duplicate      frame {frame} appears {counts[frame]} times")
     planned = session.info.get("plan", {}).get("frames")
     missing_planned = (planned - len(counts)) if isinstance(planned, int) else 0
-    ok = not problems and not duplicates
+    strays = stray_files(session)
+    for line in strays:
+        console.print(line, highlight=False)
+    ok = not problems and not duplicates and not strays
     summary = (
         f"{len(session.frames)} frames checked, {len(problems)} missing or corrupt, "
-        f"{len(duplicates)} duplicated"
+        f"{len(duplicates)} duplicated, {len(strays)} orphaned, quarantined or off-plan"
     )
     if missing_planned > 0:
         summary += (
@@ -59,6 +63,37 @@ def handle_verify(args: argparse.Namespace) -> int:
         ("[green]ok:[/] " if ok else "[bold red]problems:[/] ") + summary, highlight=False
     )
     return 0 if ok else 1
+
+
+def stray_files(session: Session) -> list[str]:
+    """Files no manifest line owns (orphans, unfinished downloads), quarantined files, and
+    lines naming a view beyond the plan: each makes the session not verified."""
+    owned = {p for r in session.frames for p in record_paths(r)}
+    lines = []
+    raw = session.raw_dir
+    for folder in (raw, raw / INCOMING):
+        if folder.is_dir():
+            lines += [
+                f"orphan         {f.relative_to(session.root).as_posix()} (no manifest line; "
+                f"`rig capture --resume {session.root}` re-adopts or quarantines it)"
+                for f in sorted(folder.iterdir())
+                if f.is_file() and f.relative_to(session.root).as_posix() not in owned
+            ]
+    quarantine = session.root / QUARANTINE_DIR
+    if quarantine.is_dir():
+        lines += [
+            f"quarantined    {QUARANTINE_DIR}/{f.name} (see {QUARANTINE_DIR}/{REASONS_FILE})"
+            for f in sorted(quarantine.iterdir())
+            if f.is_file() and f.name != REASONS_FILE and not f.name.startswith("manifest-")
+        ]
+    views = session.info.get("plan", {}).get("views")
+    if isinstance(views, int):
+        lines += [
+            f"off-plan       frame {r.frame}: view {r.view} (the plan has {views} views)"
+            for r in session.frames
+            if r.view >= views
+        ]
+    return lines
 
 
 def companion_problems(session: Session) -> list[FrameProblem]:

@@ -64,7 +64,7 @@ def test_camera_failure_leaves_a_resumable_session(tmp_path: Path) -> None:
     assert [r["status"] for r in Session.open(out).info["runs"]][-1] == "complete"
 
 
-def test_resume_repairs_a_torn_manifest_and_deletes_orphans(tmp_path: Path) -> None:
+def test_resume_repairs_a_torn_manifest_and_re_adopts_its_frame(tmp_path: Path) -> None:
     out = tmp_path / "s"
     with pytest.raises(RigError):
         capture(out, open_rig=fake_rig(fail_at=9))
@@ -72,11 +72,11 @@ def test_resume_repairs_a_torn_manifest_and_deletes_orphans(tmp_path: Path) -> N
     lines = manifest.read_bytes().splitlines(keepends=True)
     torn = lines[-1][: len(lines[-1]) // 2]  # the last append was cut by a kill
     manifest.write_bytes(b"".join(lines[:-1]) + torn)
-    lost = json.loads(lines[-1])["path"]  # its file is now an orphan
+    lost = json.loads(lines[-1])["path"]  # its file is now an orphan, re-adopted
     (out / "raw" / ".incoming" / "f00009.npy").write_bytes(b"half")
     capture(out, resume=True)
     assert_complete(out, 16)
-    assert (out / lost).is_file()  # re-captured under the same name
+    assert (out / lost).is_file()  # kept under its name
     assert not any((out / "raw" / ".incoming").iterdir())
 
 

@@ -45,7 +45,8 @@ def test_sigkill_at_random_instants_then_resume(tmp_path: Path, seed: int) -> No
     assert kills >= 1
     assert_complete(out)
     runs = Session.open(out).info["runs"]
-    assert len(runs) == kills + 1 and runs[-1]["status"] == "complete"
+    # a resume killed after re-adopting a frame but before recording its run leaves no run
+    assert 2 <= len(runs) <= kills + 1 and runs[-1]["status"] == "complete"
 
 
 def test_ctrl_c_exits_130_with_the_resume_command(tmp_path: Path) -> None:

@@ -20,8 +20,10 @@ from drivers.cameras.gphoto2_camera import Gphoto2Camera, parse_shutter
 from drivers.cameras.handheld import HandheldImportCamera, match_files_to_frames
 from drivers.protocols import Camera
 
-
 # -- fake python-gphoto2 --------------------------------------------------------------------
+GP_WIDGET_TEXT, GP_WIDGET_RADIO, GP_WIDGET_MENU = 2, 5, 6  # libgphoto2's CameraWidgetType
+
+
 class FakeGPhoto2Error(Exception):
     def __init__(self, code: int, text: str = "error") -> None:
         super().__init__(f"[{code}] {text}")
@@ -45,6 +47,7 @@ class FakeWidget:
             get_value=lambda: self.values[name],
             set_value=set_value,
             get_choices=lambda: iter(self.choices.get(name, [])),
+            get_type=lambda: GP_WIDGET_RADIO if name in self.choices else GP_WIDGET_TEXT,
         )
 
 
@@ -110,6 +113,9 @@ def fake_gphoto2(camera: FakeCamera) -> SimpleNamespace:
         Camera=lambda: camera,
         GPhoto2Error=FakeGPhoto2Error,
         GP_ERROR_CAMERA_BUSY=-110,
+        GP_ERROR_BAD_PARAMETERS=-2,
+        GP_WIDGET_RADIO=GP_WIDGET_RADIO,
+        GP_WIDGET_MENU=GP_WIDGET_MENU,
         GP_CAPTURE_IMAGE=0,
         GP_FILE_TYPE_NORMAL=1,
         GP_EVENT_TIMEOUT=1,
