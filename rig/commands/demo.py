@@ -21,10 +21,9 @@ from calibration.errors import RigError
 from reconstruct.board import umeyama
 from reconstruct.camera import read_colmap_text
 from reconstruct.evaluate import evaluate, load_mesh, surface_distance
-from reconstruct.pipeline import run_reconstruction
 from reconstruct.poses import SUMMARY as POSE_SUMMARY
+from reconstruct.runlog import run_logged
 from rig.capture import run_capture
-from rig.commands.reconstruct import ProgressPrinter
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -86,7 +85,7 @@ def handle(args: argparse.Namespace) -> int:
         timings["capture"] = time.perf_counter() - t
         bar.update(task, advance=1, description="demo: reconstruction")
         t = time.perf_counter()
-        rec = run_reconstruction(session, config, None, ProgressPrinter(console))
+        rec = run_logged(session, config, None, args.verbose, console)
         timings["reconstruction"] = time.perf_counter() - t
         bar.update(task, advance=1, description="demo: evaluation")
         t = time.perf_counter()
