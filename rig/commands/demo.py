@@ -81,7 +81,10 @@ def handle(args: argparse.Namespace) -> int:
     ) as bar:
         task = bar.add_task("demo: simulated capture", total=3)
         t = time.perf_counter()
-        run_capture(profile_path, session, yes=True, seed=args.seed, console=console)
+        with open(out / "capture.txt", "w", encoding="utf-8") as capture_log:
+            # the per-view prompts are for a person holding the camera: shown with -v only
+            prompts = console if args.verbose else Console(file=capture_log, width=100)
+            run_capture(profile_path, session, yes=True, seed=args.seed, console=prompts)
         timings["capture"] = time.perf_counter() - t
         bar.update(task, advance=1, description="demo: reconstruction")
         t = time.perf_counter()
