@@ -6,9 +6,9 @@ on the terminal with ``-v``, instead of one printed line per iteration at every 
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from types import TracebackType
-from typing import Any
+from typing import Any, TypeVar
 
 from rich.console import Console
 from rich.progress import (
@@ -24,6 +24,7 @@ from reconstruct.optimise.solver import IterationRecord
 from reconstruct.optimise.steps import OptimiseSettings
 
 log = logging.getLogger("reconstruct.optimise")
+T = TypeVar("T")
 
 HEADER = (
     "stage     it   rendering    spectral  photometric   geometric        total      step"
@@ -54,6 +55,16 @@ def new_progress(console: Console | None = None, transient: bool = False) -> Pro
         console=console,
         transient=transient,
     )
+
+
+def track(items: Sequence[T], description: str) -> Iterator[T]:
+    """Iterate with a transient bar on stderr: for loops over views that take seconds each
+    (plane-sweep stereo, visibility ray casting), gone from the terminal once done."""
+    with new_progress(Console(stderr=True), transient=True) as bar:
+        task = bar.add_task(description, total=len(items), note="")
+        for item in items:
+            yield item
+            bar.advance(task)
 
 
 class IterationProgress:
