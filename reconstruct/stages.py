@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import os
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
@@ -127,9 +128,14 @@ def quiet_colmap() -> Iterator[None]:
 
 
 def attach_log_file(recon_dir: Path) -> logging.Handler:
-    """Send the ``reconstruct`` logger to ``recon/log.txt`` (appending across runs)."""
+    """Send the ``reconstruct`` logger to ``recon/log.txt`` (appending across runs). When an
+    enclosing block already logs there (:mod:`reconstruct.runlog`) a no-op handler is returned,
+    so no line is written twice."""
     recon_dir.mkdir(parents=True, exist_ok=True)
-    handler = logging.FileHandler(recon_dir / LOG_FILE, encoding="utf-8")
+    path = os.path.abspath(recon_dir / LOG_FILE)
+    if any(getattr(h, "baseFilename", None) == path for h in log.handlers):
+        return logging.NullHandler()
+    handler = logging.FileHandler(path, encoding="utf-8")
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
     log.addHandler(handler)
     if log.level == logging.NOTSET or log.level > logging.INFO:

@@ -22,6 +22,7 @@ import trimesh
 from reconstruct import poses as poses_stage
 from reconstruct.camera import Intrinsics, Pose, project
 from reconstruct.dense.poisson import read_mesh
+from reconstruct.progress import track
 from reconstruct.raycast import RayCaster
 from reconstruct.session import write_bytes_atomically
 from reconstruct.stages import run_stage
@@ -85,7 +86,7 @@ def compute_visibility(
     normals = np.asarray(mesh.vertex_normals, dtype=float)
     views = np.array(sorted(poses), dtype=np.int64)
     rows_l, cols_l, depth_l = [], [], []
-    for col, view in enumerate(views):
+    for col, view in enumerate(track(views.tolist(), "visibility: ray casting")):
         pose, intr = poses[int(view)], intrinsics[int(view)]
         uv = project(intr, pose, points)
         z = pose.to_camera(points)[:, 2]

@@ -30,6 +30,7 @@ COMMANDS: tuple[str, ...] = (
     "relight",
     "evaluate",
     "board",
+    "batch",
 )
 
 log = logging.getLogger("rig")
@@ -62,17 +63,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def configure_logging(verbosity: int, debug: bool) -> None:
+    """Quiet by default: warnings only on the terminal, INFO with -v, DEBUG with -vv. The level
+    is set on the handler too: loggers that write INFO to recon/log.txt (``reconstruct``) set
+    their own level, and their records would otherwise reach the terminal as well."""
     level = logging.WARNING
     if verbosity == 1:
         level = logging.INFO
     elif verbosity >= 2 or debug:
         level = logging.DEBUG
-    logging.basicConfig(
-        level=level,
-        format="%(name)s: %(message)s",
-        handlers=[RichHandler(console=Console(stderr=True), show_path=False)],
-        force=True,
-    )
+    handler = RichHandler(console=Console(stderr=True), show_path=False)
+    handler.setLevel(level)
+    logging.basicConfig(level=level, format="%(name)s: %(message)s", handlers=[handler], force=True)
 
 
 class Terminated(KeyboardInterrupt):

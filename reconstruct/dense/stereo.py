@@ -19,6 +19,7 @@ import trimesh
 from scipy.ndimage import map_coordinates
 
 from reconstruct.camera import Intrinsics, Pose, project
+from reconstruct.progress import track
 from reconstruct.raycast import RayCaster
 
 log = logging.getLogger("reconstruct.dense")
@@ -242,7 +243,7 @@ def hull_stereo_points(
     views = [v for v in views if near[v]]
     maps = {
         v: sweep_view(v, images, masks, intrinsics, poses, near[v], caster, span, conf)
-        for v in views
+        for v in track(views, "initial mesh: plane-sweep stereo")
     }
     votes = consistent(maps, intrinsics, poses, near, conf.consistency)
     ok = {v: votes[v] >= conf.min_consistent for v in views}

@@ -21,10 +21,9 @@ from calibration.errors import RigError
 from reconstruct.board import umeyama
 from reconstruct.camera import read_colmap_text
 from reconstruct.evaluate import evaluate, load_mesh, surface_distance
-from reconstruct.pipeline import run_reconstruction
 from reconstruct.poses import SUMMARY as POSE_SUMMARY
+from reconstruct.runlog import run_logged
 from rig.capture import run_capture
-from rig.commands.reconstruct import ProgressPrinter
 from rig.outpaths import output_dir
 
 
@@ -83,11 +82,14 @@ def handle(args: argparse.Namespace) -> int:
     ) as bar:
         task = bar.add_task("demo: simulated capture", total=3)
         t = time.perf_counter()
-        run_capture(profile_path, session, yes=True, seed=args.seed, console=console)
+        with open(out / "capture.txt", "w", encoding="utf-8") as capture_log:
+            # the per-view prompts are for a person holding the camera: shown with -v only
+            prompts = console if args.verbose else Console(file=capture_log, width=100)
+            run_capture(profile_path, session, yes=True, seed=args.seed, console=prompts)
         timings["capture"] = time.perf_counter() - t
         bar.update(task, advance=1, description="demo: reconstruction")
         t = time.perf_counter()
-        rec = run_reconstruction(session, config, None, ProgressPrinter(console))
+        rec = run_logged(session, config, None, args.verbose, console)
         timings["reconstruction"] = time.perf_counter() - t
         bar.update(task, advance=1, description="demo: evaluation")
         t = time.perf_counter()

@@ -11,9 +11,9 @@ from rich.table import Table
 from rich.text import Text
 
 from calibration.errors import RigError
-from reconstruct.optimise.solver import IterationRecord
-from reconstruct.pipeline import Reconstruction, load_config, run_reconstruction
+from reconstruct.pipeline import Reconstruction, load_config
 from reconstruct.run_status import describe, read_status
+from reconstruct.runlog import run_logged
 from reconstruct.session import RECON_DIR
 
 
@@ -43,33 +43,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "interrupted) and exit",
     )
     parser.set_defaults(func=handle)
-
-
-class ProgressPrinter:
-    """One line per optimiser iteration: stage, each cost term, step, damping, CG, time."""
-
-    def __init__(self, console: Console) -> None:
-        self.console = console
-        self.header = False
-
-    def __call__(self, stage: str, rec: IterationRecord) -> None:
-        if not self.header:
-            self.console.print(
-                "[bold]stage     it   rendering    spectral  photometric   geometric"
-                "        total      step  λ        CG  time[/]",
-                soft_wrap=True,
-            )
-            self.header = True
-        t = rec.terms
-        mark = "" if rec.accepted else " [dim](rejected)[/]"
-        self.console.print(
-            f"{stage:8s} {rec.iteration:3d}  {t['rendering']:10.4e}  {t['spectral']:10.3e}  "
-            f"{t['photometric']:10.3e}  {t['geometric']:10.3e}  {t['total']:11.5e}  "
-            f"{rec.step_norm:8.2e}  {rec.lam:7.1e}  {rec.cg_iterations:3d}  "
-            f"{rec.seconds:5.2f}s{mark}",
-            highlight=False,
-            soft_wrap=True,
-        )
 
 
 def summary(console: Console, rec: Reconstruction) -> None:
@@ -108,7 +81,7 @@ def handle(args: argparse.Namespace) -> int:
             f"--initial-mesh {args.initial_mesh} is not a file", "give a PLY, OBJ, STL, OFF or GLB"
         )
     config = load_config(args.config)
-    rec = run_reconstruction(args.session, config, args.initial_mesh, ProgressPrinter(console))
+    rec = run_logged(args.session, config, args.initial_mesh, args.verbose, console)
     summary(console, rec)
     print(rec.recon_dir)
     skipped = rec.report["skipped_frames"]

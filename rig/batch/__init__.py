@@ -1,0 +1,1 @@
+"""`rig batch`: many sessions reconstructed on a Dask cluster, one task per session."""

@@ -1,0 +1,58 @@
+"""The Dask cluster a batch runs on: an existing scheduler, or a local one sized to the machine.
+
+A local cluster uses worker processes with one thread each (a reconstruction is one process's
+work; NumPy's own threads are pinned to one by Dask's nanny), as many as there are cores and
+memory for, each limited to its share of the machine's memory. It listens on 127.0.0.1 only and
+has no dashboard."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import psutil
+from distributed import Client, LocalCluster
+
+from calibration.errors import RigError
+
+# What one reconstruction of a demo-sized session (20 views, 60k faces) needs, with margin.
+WORKER_MEMORY = 4 * 2**30
+
+
+def local_size(workers: int | None) -> tuple[int, int]:
+    """Number of workers and memory limit per worker (bytes) on this machine."""
+    memory = int(psutil.virtual_memory().total)
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    if workers is None:
+        workers = max(1, min(int(cores or 1), memory // WORKER_MEMORY))
+    return workers, memory // workers
+
+
+@contextmanager
+def open_client(workers: int | None = None, scheduler: str | None = None) -> Iterator[Client]:
+    """A client of ``scheduler`` (``tcp://host:port``), else of a new local cluster."""
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError) as error:
+            raise RigError(
+                f"cannot reach the Dask scheduler at {scheduler}: {error}",
+                "start it (`dask scheduler`) or check --scheduler's address",
+            ) from error
+        with client:
+            yield client
+        return
+    n, memory = local_size(workers)
+    with (
+        LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            memory_limit=memory,
+            host="127.0.0.1",
+            dashboard_address=None,
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        yield client

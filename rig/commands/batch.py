@@ -1,0 +1,93 @@
+"""`rig batch SESSIONS... | --list FILE`: reconstruct a collection on a Dask cluster."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from rich.console import Console
+
+from calibration.errors import RigError
+from reconstruct.pipeline import load_config
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "batch",
+        help="reconstruct many sessions on a Dask cluster (local or existing)",
+        description="Reconstruct every session as one task on Dask distributed: a local "
+        "cluster sized to this machine (one single-threaded worker process per core that "
+        "memory allows), or an existing one with --scheduler. A failed session is reported "
+        "with its error and the others go on; sessions already reconstructed are skipped. "
+        "Each session's log is SESSION/recon/log.txt. Exit status 1 when any session failed.",
+    )
+    parser.add_argument("sessions", nargs="*", type=Path, help="session folders")
+    parser.add_argument(
+        "--list",
+        dest="list_file",
+        type=Path,
+        default=None,
+        help="text file with one session folder per line (# comments; relative to the file)",
+    )
+    parser.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="reconstruct config (YAML) applied to every session, as for `rig reconstruct`",
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="worker processes of the local cluster (default: cores, memory permitting)",
+    )
+    parser.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="use this running Dask scheduler (e.g. tcp://10.0.0.5:8786) instead of a local "
+        "cluster; its workers must see the session folders at the same paths",
+    )
+    parser.add_argument(
+        "--force", action="store_true", help="reconstruct sessions that already have outputs"
+    )
+    parser.add_argument(
+        "--summary",
+        type=Path,
+        default=None,
+        metavar="CSV",
+        help="also write the summary table (all columns) to this CSV file",
+    )
+    parser.set_defaults(func=handle)
+
+
+def handle(args: argparse.Namespace) -> int:
+    from rig.batch.run import run_batch  # Dask loads only for this command
+    from rig.batch.sessions import collect
+    from rig.batch.summary import table, write_csv
+
+    if args.workers is not None and args.workers < 1:
+        raise RigError(f"--workers {args.workers} is not a positive number", "give 1 or more")
+    if args.workers is not None and args.scheduler is not None:
+        raise RigError(
+            "--workers sizes a local cluster, but --scheduler names an existing one",
+            "drop one of them",
+        )
+    sessions = collect(args.sessions, args.list_file)
+    config = load_config(args.config)
+    console = Console(stderr=True)
+    outcomes = run_batch(
+        sessions, config, args.force, args.workers, args.scheduler, args.verbose, console
+    )
+    Console().print(table(outcomes))
+    if args.summary is not None:
+        console.print(f"summary: {write_csv(args.summary, outcomes)}", highlight=False)
+    failed = [o for o in outcomes if o.status == "failed"]
+    for outcome in failed:
+        console.print(
+            f"failed: {outcome.session}: {outcome.error}",
+            highlight=False,
+            markup=False,
+            soft_wrap=True,
+        )
+    return 1 if failed else 0

@@ -1,0 +1,76 @@
+"""`rig batch` on a 2-worker local Dask cluster: three tiny sim sessions, one broken on purpose
+(its calibration snapshot deleted): the broken one is reported with its one-line error, the two
+others reconstructed; a second run skips those two; the summary CSV holds the figures."""
+
+from __future__ import annotations
+
+import csv
+import shutil
+from pathlib import Path
+
+import pytest
+from tiny import FAST, copies
+
+from calibration.errors import RigError
+from rig.batch.sessions import collect
+from rig.cli import main
+
+
+def read_summary(path: Path) -> dict[str, dict[str, str]]:
+    with open(path, newline="", encoding="utf-8") as f:
+        return {Path(row["session"]).name: row for row in csv.DictReader(f)}
+
+
+def test_batch_isolates_a_broken_session_and_skips_done_ones(
+    template: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    good1, good2, broken = copies(template, tmp_path, ["good1", "good2", "broken"])
+    shutil.rmtree(broken / "calibration")
+    listing = tmp_path / "sessions.txt"
+    listing.write_text("# the collection\ngood2\nbroken\n")
+    csv_path = tmp_path / "batch.csv"
+    argv = ["batch", str(good1), "--list", str(listing), "--workers", "2"]
+    argv += ["--config", str(FAST), "--summary", str(csv_path)]
+
+    assert main(argv) == 1  # one session failed
+    out, err = capfd.readouterr()
+    rows = read_summary(csv_path)
+    assert [rows[n]["status"] for n in ("good1", "good2", "broken")] == ["done", "done", "failed"]
+    assert "calibration" in rows["broken"]["error"] and "\n" not in rows["broken"]["error"]
+    assert f"failed: {broken}" in err
+    for name in ("good1", "good2"):
+        assert int(rows[name]["vertices"]) > 500
+        assert int(rows[name]["observed_vertices"]) > 100
+        assert float(rows[name]["cost_total"]) > 0
+        assert len(rows[name]["light_offset_cm"].split()) == 3
+        assert (tmp_path / name / "recon" / "mesh.ply").is_file()
+        log = (tmp_path / name / "recon" / "log.txt").read_text()
+        assert "optimise" in log and "INFO" in log  # each worker's chatter is in its log
+    assert not (broken / "recon" / "mesh.ply").exists()
+    assert "INFO" not in out + err  # quiet by default, workers included
+    assert "done" in out and "failed" in out  # the table on stdout
+
+    mtime = (good1 / "recon" / "mesh.ply").stat().st_mtime_ns
+    assert main(argv) == 1
+    rows = read_summary(csv_path)
+    statuses = [rows[n]["status"] for n in ("good1", "good2", "broken")]
+    assert statuses == ["skipped", "skipped", "failed"]
+    assert rows["good1"]["vertices"] != ""  # figures read back from report.json
+    assert (good1 / "recon" / "mesh.ply").stat().st_mtime_ns == mtime
+
+
+def test_sessions_from_arguments_and_list(tmp_path: Path) -> None:
+    listing = tmp_path / "l.txt"
+    listing.write_text("a  # first\n\n/abs/b\na\n")
+    got = collect([tmp_path / "a", Path("/abs/c")], listing)
+    assert got == [tmp_path / "a", Path("/abs/c"), Path("/abs/b")]
+    with pytest.raises(RigError, match="no session given"):
+        collect([], None)
+    with pytest.raises(RigError, match="cannot read --list"):
+        collect([], tmp_path / "missing.txt")
+
+
+def test_bad_arguments_are_one_line_errors(tmp_path: Path) -> None:
+    assert main(["batch", str(tmp_path), "--workers", "0"]) == 2
+    assert main(["batch", str(tmp_path), "--workers", "2", "--scheduler", "tcp://x:1"]) == 2
+    assert main(["batch"]) == 2
