@@ -3,7 +3,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from tiny import capture
+from batch_sessions import capture
 
 
 @pytest.fixture(scope="module")

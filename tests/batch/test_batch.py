@@ -9,7 +9,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from tiny import FAST, copies
+from batch_sessions import FAST, copies
 
 from calibration.errors import RigError
 from rig.batch.sessions import collect

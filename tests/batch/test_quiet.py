@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pycolmap
 import pytest
-from tiny import FAST, copies
+from batch_sessions import FAST, copies
 
 from reconstruct.runlog import captured_output
 from rig.cli import main

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tiny import make_session, reconstruct_args, spawn
+from recon_tiny import make_session, reconstruct_args, spawn
 
 from reconstruct import export, publish
 from reconstruct.optimise.checkpoint import FILE as CHECKPOINT
