@@ -15,6 +15,7 @@ RSS; error maps (PNG) beside the tables in ``--out``.
 from __future__ import annotations
 
 import argparse
+import json
 import time
 from pathlib import Path
 from typing import Any
@@ -60,6 +61,18 @@ SIZES = {
     "full": Size(width=800, height=600, focal_px=1100.0, views=40, spp=16),
 }
 SMOKE_SCENES = ("spot-stepped",)
+# the optimiser's iteration budget: rig reconstruct's defaults, `rig demo`'s, or a smoke run's
+BUDGETS: dict[str, dict[str, Any]] = {
+    "default": {},
+    "demo": {
+        "subdivide": {"max_faces": 60000},
+        "optimise": {"outer_iterations": 2, "light_iterations": 10, "joint_iterations": 8},
+    },
+    "smoke": {
+        "subdivide": {"max_faces": 20000},
+        "optimise": {"outer_iterations": 1, "light_iterations": 3, "joint_iterations": 3},
+    },
+}
 
 
 def distances(points: np.ndarray, mesh_path: Path) -> np.ndarray:
@@ -103,7 +116,9 @@ def per_patch_rmse(npz: Path, out: Path, truth: Path) -> dict[int, float]:
     return {int(k): float(rmse[observed & (p == k)].mean()) for k in np.unique(p[observed])}
 
 
-def run_scene(spec: SceneSpec, size: Size, out: Path, cache: Path, data: Path) -> dict[str, Any]:
+def run_scene(
+    spec: SceneSpec, size: Size, out: Path, cache: Path, data: Path, config: dict[str, Any]
+) -> dict[str, Any]:
     """Render (or reuse) the session, reconstruct it, score it and the oracle."""
     from bench.paper_sim import _score, do_oracle
     from reconstruct.pipeline import run_reconstruction
@@ -115,13 +130,14 @@ def run_scene(spec: SceneSpec, size: Size, out: Path, cache: Path, data: Path) -
         build_session(spec, size, folder, data, cache)
     render_s = time.perf_counter() - t0
     t0 = time.perf_counter()
-    rec = run_reconstruction(session, {}, None)
+    rec = run_reconstruction(session, config, None)
     reconstruct_s = time.perf_counter() - t0
     truth = session / "ground_truth"
     positions = np.asarray(rec.report["light"]["positions_m"], dtype=float)
     final_dir = folder / "final"
     final = _score(session, rec.reflectance_path, final_dir, positions, offset=True)
-    oracle = do_oracle(session, None, folder / "oracle", {})
+    (folder / "oracle").mkdir(parents=True, exist_ok=True)
+    oracle = do_oracle(session, None, folder / "oracle", config)
     from reconstruct import export
 
     final_mesh = final_dir / "final_mesh.ply"
@@ -137,7 +153,7 @@ def run_scene(spec: SceneSpec, size: Size, out: Path, cache: Path, data: Path) -
         "distance_factors": list(spec.distance_factors),
         "render_s": render_s,
         "reconstruct_s": reconstruct_s,
-        "timings_s": rec.report.get("timings_s", {}),
+        "timings_s": stage_seconds(session, rec.report),
         "initial": shape_stats(Path(rec.report["initial_mesh"]), truth / "mesh.ply"),
         "final": shape_stats(final_mesh, truth / "mesh.ply"),
         "rmse_mean": final["rmse_mean"],
@@ -149,6 +165,15 @@ def run_scene(spec: SceneSpec, size: Size, out: Path, cache: Path, data: Path) -
         "peak_rss_mb": peak_rss_mb(),
         "error_maps": [str(p) for p in sorted(folder.rglob("*error_map.png"))],
     }
+
+
+def stage_seconds(session: Path, report: dict[str, Any]) -> dict[str, float]:
+    """Seconds per stage: the front stages' (recon/timings.json; a stage reused from an
+    earlier run shows only its up-to-date check) and the optimiser's steps."""
+    front = json.loads((session / "recon" / "timings.json").read_text())
+    out = {name: float(t["seconds"]) for name, t in front.items()}
+    inner = {k: float(v) for k, v in report.get("timings_s", {}).items() if k != "front"}
+    return {**out, **inner}
 
 
 def _mm(x: float | None) -> str:
@@ -194,6 +219,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cache", type=Path, default=None, help="shading cache (default OUT/cache)")
     p.add_argument("--data", type=Path, default=DATA, help="the shared data folder")
     p.add_argument("--ambient", type=float, default=0.0, help="ambient level vs the bulb")
+    p.add_argument(
+        "--budget",
+        choices=tuple(BUDGETS),
+        default=None,
+        help="optimiser iterations: rig reconstruct's default, rig demo's, or smoke "
+        "(default: smoke for --size smoke, else default)",
+    )
     a = p.parse_args(argv)
     size = SIZES[a.size]
     if a.ambient:
@@ -203,7 +235,9 @@ def main(argv: list[str] | None = None) -> int:
     names = a.scenes or (SMOKE_SCENES if a.size == "smoke" else tuple(SCENES))
     out = a.out / a.size
     out.mkdir(parents=True, exist_ok=True)
-    results = [run_scene(SCENES[n], size, out, a.cache or a.out / "cache", a.data) for n in names]
+    budget = a.budget or ("smoke" if a.size == "smoke" else "default")
+    cache = a.cache or a.out / "cache"
+    results = [run_scene(SCENES[n], size, out, cache, a.data, BUDGETS[budget]) for n in names]
     report(
         "external",
         out,
@@ -212,7 +246,7 @@ def main(argv: list[str] | None = None) -> int:
         machine_info(),
         notes=[
             f"{a.size}: {size.width}x{size.height}, {size.views} views, {size.spp} spp, "
-            f"ambient {size.ambient}; error maps under {out}/SCENE/"
+            f"ambient {size.ambient}, optimiser budget {budget}; error maps under {out}/SCENE/"
         ],
     )
     return 0

@@ -172,7 +172,7 @@ def build_session(
     scene.save(scene_dir)
     ssf = camera_ssf(data, spec.camera)
     lamps = {n: lamp_spd(data, lamp) for n, lamp in spec.lamps.items()}
-    nearest = size.radius_m * min(spec.distance_factors) - size.object_m / 2
+    nearest = size.radius_m * min(spec.distance_factors) - size.object_m / 4
     scale = exposure_scale(lamps, ssf, nearest)
     lamps = {n: spd * scale for n, spd in lamps.items()}
     ambient = None

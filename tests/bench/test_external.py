@@ -14,6 +14,7 @@ pytest.importorskip("mitsuba")
 from bench.external_render import ShadingRenderer, compose
 from bench.external_scene import SceneSpec
 from bench.external_session import Size, build_session
+from reconstruct import decode
 from reconstruct.camera import Intrinsics, Pose, project
 from reconstruct.decode import decode_raw
 
@@ -99,3 +100,5 @@ def test_tiny_session_decodes_to_the_composed_image(shared_data: Path, tmp_path:
     amb, _ = decode_raw(next(p for p in raws if p.name.endswith("_ambient.dng")), "linear", 0.98)
     assert lit.shape == (48, 64, 3)
     assert lit.mean() > 5 * amb.mean() > 0  # the bulb dominates, the ambient is there
+    decoded = decode.run({}, session, tmp_path / "decoded")  # rig reconstruct's decode stage
+    assert len(sorted(Path(decoded).glob("frame_*_sat.npy"))) == 12
