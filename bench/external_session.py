@@ -42,7 +42,7 @@ class Size:
 
     width: int = 800
     height: int = 600
-    focal_px: float = 1400.0
+    focal_px: float = 1100.0
     views: int = 40
     object_m: float = 0.2
     radius_m: float = 0.5
