@@ -168,6 +168,15 @@ class ShadingRenderer:
             self._scenes[kind] = mi.load_dict({**self._base, "emitter": emitter})
         return self._scenes[kind]
 
+    def _posed(self, pose: Pose, light_position: np.ndarray | None) -> tuple[Any, Any]:
+        """The lit (or ambient) scene and its parameters with camera and light placed."""
+        scene = self._scene("ambient" if light_position is None else "lit")
+        params = self.mi.traverse(scene)
+        params["sensor.to_world"] = _to_world(self.mi, pose)
+        if light_position is not None:
+            params["emitter.position"] = [float(x) for x in light_position]
+        return scene, params
+
     def _indicators(self, chunk: int) -> np.ndarray:
         """Vertex colours with patches 3·chunk, 3·chunk+1, 3·chunk+2 in R, G, B."""
         col = np.zeros((len(self.patch), 3), dtype=np.float32)
@@ -190,19 +199,13 @@ class ShadingRenderer:
         path = None if self.cache is None else self.cache / f"{self._key}_{key}.npz"
         if path is not None and path.is_file():
             return np.load(path)["shading"].astype(np.float32)
-        mi = self.mi
-        kind = "ambient" if light_position is None else "lit"
-        scene = self._scene(kind)
-        params = mi.traverse(scene)
-        params["sensor.to_world"] = _to_world(mi, pose)
-        if light_position is not None:
-            params["emitter.position"] = [float(x) for x in light_position]
+        scene, params = self._posed(pose, light_position)
         chunks = -(-self.n_patches // 3)
         out = np.zeros((3 * chunks, self.intrinsics.height, self.intrinsics.width), np.float32)
         for j in range(chunks):
             params["object.vertex_color"] = np.ravel(self._indicators(j))
             params.update()
-            img = np.asarray(mi.render(scene, spp=self.spp, seed=j), dtype=np.float32)
+            img = np.asarray(self.mi.render(scene, spp=self.spp, seed=j), dtype=np.float32)
             out[3 * j : 3 * j + 3] = np.moveaxis(img, 2, 0)
         out = out[: self.n_patches]
         if path is not None:
@@ -214,15 +217,10 @@ class ShadingRenderer:
 
     def render_white(self, pose: Pose, light_position: np.ndarray | None) -> np.ndarray:
         """One render with every patch white (H, W): the linearity check of the indicators."""
-        mi = self.mi
-        scene = self._scene("ambient" if light_position is None else "lit")
-        params = mi.traverse(scene)
-        params["sensor.to_world"] = _to_world(mi, pose)
-        if light_position is not None:
-            params["emitter.position"] = [float(x) for x in light_position]
+        scene, params = self._posed(pose, light_position)
         params["object.vertex_color"] = np.ones(3 * len(self.patch), dtype=np.float32)
         params.update()
-        return np.asarray(mi.render(scene, spp=self.spp, seed=0), dtype=np.float32)[..., 0]
+        return np.asarray(self.mi.render(scene, spp=self.spp, seed=0), dtype=np.float32)[..., 0]
 
 
 def compose(shading: np.ndarray, patch_rgb: np.ndarray) -> np.ndarray:
