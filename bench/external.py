@@ -1,0 +1,260 @@
+"""External-renderer benchmark: scenes rendered by Mitsuba 3 (never by the project's forward
+model) from real scanned meshes, measured lamps and measured camera sensitivities, captured
+into real sessions, reconstructed by ``rig reconstruct``'s default path (poses given, dense
+initial mesh) and scored against the truth and against a per-vertex least-squares oracle.
+
+    python -m bench.external --size smoke            # one tiny scene (seconds of rendering)
+    python -m bench.external --size full             # 3 scenes, 800x600, 40 views
+    python -m bench.external --size medium --scenes spot-stepped
+
+Per scene: initial and final accuracy/completeness (mean, median, p90), spectral RMSE (mean,
+median, per ColorChecker patch), the oracle's RMSE, light offset error, time per stage, peak
+RSS; error maps (PNG) beside the tables in ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from bench._common import DEFAULT_OUT, ResultTable, fmt, machine_info, peak_rss_mb, report
+from bench.external_scene import DATA, SceneSpec
+from bench.external_session import Size, build_session
+from calibration.defaults import colorchecker_reflectances
+
+SCENES = {
+    "spot-stepped": SceneSpec(
+        "spot-stepped",
+        "spot.obj",
+        {"L1": "Sunwayfoto.LED.FL96.at.3000K", "L2": "Sunwayfoto.LED.FL96.at.5500K"},
+        "Nikon D700",
+        (0.7, 1.0, 1.3),
+        (20.0, 45.0),
+    ),
+    "cow-ring": SceneSpec(
+        "cow-ring",
+        "cow.obj",
+        {"L1": "elgato:at.2900K.dimmed.to.100pc", "L2": "elgato:at.7000K.dimmed.to.100pc"},
+        "Canon 600D",
+        (1.0,),
+        (30.0,),
+        seed=1,
+    ),
+    "nefertiti-stepped": SceneSpec(
+        "nefertiti-stepped",
+        "nefertiti.obj",
+        {"L1": "Toshiba.LED.12W.2700K", "L2": "V.light.LED.2W.6000K"},
+        "SONY NEX-5N",
+        (0.7, 1.0, 1.3),
+        (20.0, 45.0),
+        seed=2,
+    ),
+}
+SIZES = {
+    "smoke": Size(width=160, height=120, focal_px=220.0, views=8, spp=16),
+    "medium": Size(width=400, height=300, focal_px=550.0, views=24, spp=16),
+    "full": Size(width=800, height=600, focal_px=1100.0, views=40, spp=16),
+}
+SMOKE_SCENES = ("spot-stepped",)
+# the optimiser's iteration budget: rig reconstruct's defaults, `rig demo`'s, or a smoke run's
+BUDGETS: dict[str, dict[str, Any]] = {
+    "default": {},
+    "demo": {
+        "subdivide": {"max_faces": 60000},
+        "optimise": {"outer_iterations": 2, "light_iterations": 10, "joint_iterations": 8},
+    },
+    "smoke": {
+        "subdivide": {"max_faces": 20000},
+        "optimise": {"outer_iterations": 1, "light_iterations": 3, "joint_iterations": 3},
+    },
+}
+
+
+def distances(points: np.ndarray, mesh_path: Path) -> np.ndarray:
+    """Distance of each point to the surface of the mesh at ``mesh_path``."""
+    from reconstruct.evaluate import load_mesh, surface_distance
+
+    d, _, _ = surface_distance(points, load_mesh(mesh_path))
+    return np.asarray(d)
+
+
+def shape_stats(mesh_path: Path, truth: Path) -> dict[str, float]:
+    """Accuracy (mesh -> truth) and completeness (truth -> mesh): mean, median, p90 in m."""
+    from reconstruct.evaluate import load_mesh
+
+    mesh, gt = load_mesh(mesh_path), load_mesh(truth)
+    acc = distances(np.asarray(mesh.vertices, dtype=float), truth)
+    comp = distances(np.asarray(gt.vertices, dtype=float), mesh_path)
+    return {
+        "acc_mean": float(acc.mean()),
+        "acc_median": float(np.median(acc)),
+        "acc_p90": float(np.percentile(acc, 90)),
+        "comp_mean": float(comp.mean()),
+        "comp_median": float(np.median(comp)),
+        "comp_p90": float(np.percentile(comp, 90)),
+    }
+
+
+def per_patch_rmse(npz: Path, out: Path, truth: Path) -> dict[int, float]:
+    """Mean spectral RMSE of the observed vertices of each ColorChecker patch (a vertex takes
+    the patch of its nearest true vertex)."""
+    from reconstruct import export
+    from reconstruct.evaluate import load_mesh
+
+    data = export.read_reflectance_npz(npz)
+    rmse = np.load(out / "spectral_rmse_per_vertex.npy")
+    observed = np.asarray(data.get("observed", np.ones(len(rmse))), dtype=bool)
+    gt = load_mesh(truth / "mesh.ply")
+    patch = np.load(truth / "patch.npy")
+    _, nearest = cKDTree(np.asarray(gt.vertices)).query(np.asarray(data["vertices"]))
+    p = patch[nearest]
+    return {int(k): float(rmse[observed & (p == k)].mean()) for k in np.unique(p[observed])}
+
+
+def run_scene(
+    spec: SceneSpec, size: Size, out: Path, cache: Path, data: Path, config: dict[str, Any]
+) -> dict[str, Any]:
+    """Render (or reuse) the session, reconstruct it, score it and the oracle."""
+    from bench.paper_sim import _score, do_oracle
+    from reconstruct.pipeline import run_reconstruction
+
+    folder = out / spec.name
+    session = folder / "session"
+    t0 = time.perf_counter()
+    if not (session / "session.yaml").is_file():
+        build_session(spec, size, folder, data, cache)
+    render_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    rec = run_reconstruction(session, config, None)
+    reconstruct_s = time.perf_counter() - t0
+    timings = stage_seconds(session, rec.report)  # before the oracle re-checks the stages
+    truth = session / "ground_truth"
+    positions = np.asarray(rec.report["light"]["positions_m"], dtype=float)
+    final_dir = folder / "final"
+    final = _score(session, rec.reflectance_path, final_dir, positions, offset=True)
+    (folder / "oracle").mkdir(parents=True, exist_ok=True)
+    oracle = do_oracle(session, None, folder / "oracle", config)
+    from reconstruct import export
+
+    final_mesh = final_dir / "final_mesh.ply"
+    npz = export.read_reflectance_npz(rec.reflectance_path)
+    import trimesh
+
+    trimesh.Trimesh(npz["vertices"], npz["faces"], process=False).export(final_mesh)
+    return {
+        "scene": spec.name,
+        "mesh": spec.mesh,
+        "camera": spec.camera,
+        "lamps": dict(spec.lamps),
+        "distance_factors": list(spec.distance_factors),
+        "render_s": render_s,
+        "reconstruct_s": reconstruct_s,
+        "timings_s": timings,
+        "initial": shape_stats(Path(rec.report["initial_mesh"]), truth / "mesh.ply"),
+        "final": shape_stats(final_mesh, truth / "mesh.ply"),
+        "rmse_mean": final["rmse_mean"],
+        "rmse_median": final["rmse_median"],
+        "rmse_per_patch": per_patch_rmse(rec.reflectance_path, final_dir, truth),
+        "oracle_rmse_mean": oracle["rmse_mean"],
+        "oracle_rmse_median": oracle["rmse_median"],
+        "light_offset_error_m": final["light_offset_error_m"],
+        "peak_rss_mb": peak_rss_mb(),
+        "error_maps": [str(p) for p in sorted(folder.rglob("*error_map.png"))],
+    }
+
+
+def stage_seconds(session: Path, report: dict[str, Any]) -> dict[str, float]:
+    """Seconds per stage: the front stages' (recon/timings.json; a stage reused from an
+    earlier run shows only its up-to-date check) and the optimiser's steps."""
+    skip = ("front", "optimise")  # the front's total and the optimiser's, listed in parts
+    front = json.loads((session / "recon" / "timings.json").read_text())
+    out = {name: float(t["seconds"]) for name, t in front.items() if name not in skip}
+    inner = {k: float(v) for k, v in report.get("timings_s", {}).items() if k not in skip}
+    return {**out, **inner}
+
+
+def _mm(x: float | None) -> str:
+    return "—" if x is None else f"{x * 1e3:.2f}"
+
+
+def tables(results: list[dict[str, Any]]) -> list[ResultTable]:
+    shape = ResultTable(
+        "Shape (mm): accuracy mean / median / p90, completeness mean / median / p90",
+        ["scene", "mesh", "initial acc", "initial comp", "final acc", "final comp"],
+    )
+    spectral = ResultTable(
+        "Spectra and light",
+        ["scene", "RMSE mean", "RMSE median", "oracle RMSE mean", "worst patch (RMSE)",
+         "light offset error (mm)"],
+    )  # fmt: skip
+    cost = ResultTable("Cost", ["scene", "render (s)", "stages (s)", "peak RSS (MB)"])
+    for r in results:
+        i, f = r["initial"], r["final"]
+        trio = "{:.2f} / {:.2f} / {:.2f}".format
+        shape.add(
+            r["scene"], r["mesh"],
+            trio(*(1e3 * i[k] for k in ("acc_mean", "acc_median", "acc_p90"))),
+            trio(*(1e3 * i[k] for k in ("comp_mean", "comp_median", "comp_p90"))),
+            trio(*(1e3 * f[k] for k in ("acc_mean", "acc_median", "acc_p90"))),
+            trio(*(1e3 * f[k] for k in ("comp_mean", "comp_median", "comp_p90"))),
+        )  # fmt: skip
+        worst = max(r["rmse_per_patch"].items(), key=lambda kv: kv[1])
+        name = colorchecker_reflectances()[0][int(worst[0])]
+        spectral.add(
+            r["scene"], fmt(r["rmse_mean"]), fmt(r["rmse_median"]), fmt(r["oracle_rmse_mean"]),
+            f"{name} ({worst[1]:.3f})", _mm(r["light_offset_error_m"]),
+        )  # fmt: skip
+        stages = ", ".join(f"{k} {v:.0f}" for k, v in r["timings_s"].items())
+        cost.add(r["scene"], f"{r['render_s']:.0f}", stages, f"{r['peak_rss_mb']:.0f}")
+    return [shape, spectral, cost]
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--size", choices=tuple(SIZES), default="smoke")
+    p.add_argument("--scenes", nargs="*", choices=tuple(SCENES), default=None)
+    p.add_argument("--out", type=Path, default=DEFAULT_OUT / "external")
+    p.add_argument("--cache", type=Path, default=None, help="shading cache (default OUT/cache)")
+    p.add_argument("--data", type=Path, default=DATA, help="the shared data folder")
+    p.add_argument("--ambient", type=float, default=0.0, help="ambient level vs the bulb")
+    p.add_argument(
+        "--budget",
+        choices=tuple(BUDGETS),
+        default=None,
+        help="optimiser iterations: rig reconstruct's default, rig demo's, or smoke "
+        "(default: smoke for --size smoke, else default)",
+    )
+    a = p.parse_args(argv)
+    size = SIZES[a.size]
+    if a.ambient:
+        from dataclasses import replace
+
+        size = replace(size, ambient=a.ambient)
+    names = a.scenes or (SMOKE_SCENES if a.size == "smoke" else tuple(SCENES))
+    out = a.out / a.size
+    out.mkdir(parents=True, exist_ok=True)
+    budget = a.budget or ("smoke" if a.size == "smoke" else "default")
+    cache = a.cache or a.out / "cache"
+    results = [run_scene(SCENES[n], size, out, cache, a.data, BUDGETS[budget]) for n in names]
+    report(
+        "external",
+        out,
+        tables(results),
+        {"size": a.size, "results": results},
+        machine_info(),
+        notes=[
+            f"{a.size}: {size.width}x{size.height}, {size.views} views, {size.spp} spp, "
+            f"ambient {size.ambient}, optimiser budget {budget}; error maps under {out}/SCENE/"
+        ],
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

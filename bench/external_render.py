@@ -1,0 +1,229 @@
+"""Per-patch shading images rendered by Mitsuba 3, an independent physically based renderer.
+
+Mitsuba renders RGB, so the spectra are composed outside it, exactly: every patch's *shading*
+image is rendered with an indicator reflectance (patch k white, the rest black; three patches
+at once in the R, G, B channels of one render) under a white light, with direct illumination
+only (``path`` with ``max_depth = 2``), so an image is linear in the indicators and
+
+    camera RGB = Σ_k shading_k · Cᵀ diag(L) ρ_k.
+
+The point light has intensity π, so a Lambertian patch of albedo 1 returns ``cos θ / d²``: the
+radiometric scale of the project's own model, computed here by a different renderer (its own
+BVH, shadow rays, smooth normals and box-filtered pixel sampling). Renders are cached on disk
+(compressed float16), keyed by everything that changes them, so several lamps, cameras and
+noise seeds reuse one set.
+"""
+
+from __future__ import annotations
+
+import glob
+import hashlib
+import os
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibration.errors import RigError
+from reconstruct.camera import Intrinsics, Pose
+from reconstruct.render import vertex_normals
+
+_STATE: dict[str, Any] = {}
+VARIANTS = ("llvm_ad_rgb", "scalar_rgb")
+MIN_LLVM = 16  # LLVM 15 cannot select the fminimum Mitsuba 3.9's kernels use on x86
+
+
+def newest_libllvm() -> str | None:
+    """The newest system libLLVM Dr.Jit can use (``apt install libllvm19`` provides one)."""
+    found = []
+    for path in glob.glob("/usr/lib/*/libLLVM*.so*") + glob.glob("/usr/lib/libLLVM*.so*"):
+        version = re.search(r"libLLVM[-.]?(?:so\.)?(\d+)", Path(path).name)
+        if version and int(version.group(1)) >= MIN_LLVM:
+            found.append((int(version.group(1)), path))
+    return max(found)[1] if found else None
+
+
+def mitsuba(variant: str | None = None) -> Any:
+    """The ``mitsuba`` module with a variant set: ``llvm_ad_rgb`` where libLLVM loads (much
+    faster), else ``scalar_rgb``. A missing package is one clear error."""
+    if "mi" in _STATE:
+        return _STATE["mi"]
+    if "DRJIT_LIBLLVM_PATH" not in os.environ:
+        found = newest_libllvm()
+        if found:
+            os.environ["DRJIT_LIBLLVM_PATH"] = found
+    try:
+        import mitsuba as mi
+    except ImportError as exc:
+        raise RigError(
+            "the external-renderer benchmark needs Mitsuba 3 (not installed)",
+            "pip install 'spectral-rig[external]'",
+        ) from exc
+    for name in [variant] if variant else VARIANTS:
+        try:
+            mi.set_variant(name)
+            mi.load_dict({"type": "diffuse"})  # a JIT variant fails here without libLLVM
+        except Exception:
+            continue
+        _STATE["mi"] = mi
+        return mi
+    raise RigError(f"Mitsuba variant {variant or 'llvm_ad_rgb/scalar_rgb'} does not run here")
+
+
+def _to_world(mi: Any, pose: Pose) -> Any:
+    """Mitsuba's camera-to-world for our world->camera pose (camera y down, z forward)."""
+    c = pose.center
+    return mi.ScalarTransform4f().look_at(
+        origin=[float(x) for x in c],
+        target=[float(x) for x in c + pose.R[2]],
+        up=[float(x) for x in -pose.R[1]],
+    )
+
+
+class ShadingRenderer:
+    """Renders per-patch shading images of one painted mesh (a patch index per vertex)."""
+
+    def __init__(
+        self,
+        vertices: np.ndarray,
+        faces: np.ndarray,
+        patch: np.ndarray,
+        intrinsics: Intrinsics,
+        spp: int = 16,
+        cache: Path | None = None,
+        variant: str | None = None,
+    ) -> None:
+        self.mi = mi = mitsuba(variant)
+        self.n_patches = int(patch.max()) + 1
+        self.patch = np.asarray(patch)
+        self.intrinsics = intrinsics
+        self.spp = int(spp)
+        self.cache = cache
+        fx, fy, cx, cy = (float(p) for p in intrinsics.K[[0, 1, 0, 1], [0, 1, 2, 2]])
+        if (
+            abs(fx - fy) > 1e-9
+            or abs(cx - intrinsics.width / 2) > 1e-9
+            or abs(cy - intrinsics.height / 2) > 1e-9
+            or np.any(intrinsics.distortion())
+        ):
+            raise RigError("the external renderer takes centred square-pixel pinholes only")
+        self._key = hashlib.sha1(
+            b"".join(
+                np.ascontiguousarray(a).tobytes()
+                for a in (vertices.astype(np.float64), faces.astype(np.int64), self.patch)
+            )
+            + f"{intrinsics.width}x{intrinsics.height}f{fx}s{spp}{mi.variant()}".encode()
+        ).hexdigest()[:16]
+        props = mi.Properties()
+        props["bsdf"] = mi.load_dict(
+            {"type": "diffuse", "reflectance": {"type": "mesh_attribute", "name": "vertex_color"}}
+        )
+        mesh = mi.Mesh("object", len(vertices), len(faces), props=props, has_vertex_normals=True)
+        mesh.add_attribute("vertex_color", 3, np.zeros(3 * len(vertices), dtype=np.float32))
+        params = mi.traverse(mesh)
+        params["vertex_positions"] = np.ravel(vertices).astype(np.float32)
+        params["faces"] = np.ravel(faces).astype(np.uint32)
+        # smooth shading normals computed here: Mitsuba's own normal kernel needs an LLVM
+        # newer than 15 on x86, and the project's sim shades with area-weighted normals too
+        params["vertex_normals"] = np.ravel(vertex_normals(vertices, faces)).astype(np.float32)
+        params.update()
+        self._mesh = mesh
+        fov = float(np.degrees(2.0 * np.arctan(intrinsics.width / (2.0 * fx))))
+        self._base = {
+            "type": "scene",
+            "integrator": {"type": "direct", "hide_emitters": True},
+            "sensor": {
+                "type": "perspective",
+                "fov": fov,
+                "fov_axis": "x",
+                "near_clip": 1e-3,
+                "to_world": mi.ScalarTransform4f(),
+                "film": {
+                    "type": "hdrfilm",
+                    "width": intrinsics.width,
+                    "height": intrinsics.height,
+                    "rfilter": {"type": "box"},
+                    "pixel_format": "rgb",
+                },
+                "sampler": {"type": "independent", "sample_count": self.spp},
+            },
+            "object": mesh,
+        }
+        self._scenes: dict[str, Any] = {}
+
+    def _scene(self, kind: str) -> Any:
+        """The scene with a point light (``lit``) or a uniform white environment (``ambient``)."""
+        if kind not in self._scenes:
+            mi = self.mi
+            emitter = (
+                {
+                    "type": "point",
+                    "position": [0.0, 0.0, 1.0],
+                    "intensity": {"type": "rgb", "value": [np.pi] * 3},
+                }
+                if kind == "lit"
+                else {"type": "constant", "radiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}
+            )
+            self._scenes[kind] = mi.load_dict({**self._base, "emitter": emitter})
+        return self._scenes[kind]
+
+    def _posed(self, pose: Pose, light_position: np.ndarray | None) -> tuple[Any, Any]:
+        """The lit (or ambient) scene and its parameters with camera and light placed."""
+        scene = self._scene("ambient" if light_position is None else "lit")
+        params = self.mi.traverse(scene)
+        params["sensor.to_world"] = _to_world(self.mi, pose)
+        if light_position is not None:
+            params["emitter.position"] = [float(x) for x in light_position]
+        return scene, params
+
+    def _indicators(self, chunk: int) -> np.ndarray:
+        """Vertex colours with patches 3·chunk, 3·chunk+1, 3·chunk+2 in R, G, B."""
+        col = np.zeros((len(self.patch), 3), dtype=np.float32)
+        for c in range(3):
+            col[self.patch == 3 * chunk + c, c] = 1.0
+        return col
+
+    def render(self, pose: Pose, light_position: np.ndarray | None) -> np.ndarray:
+        """Shading of every patch, (n_patches, H, W) float32: under the point light at
+        ``light_position`` (world, metres), or, with None, under a uniform unit-radiance
+        environment (ambient light, occlusion included)."""
+        key = hashlib.sha1(
+            np.ascontiguousarray(np.concatenate([pose.R.ravel(), pose.t])).tobytes()
+            + (
+                b"ambient"
+                if light_position is None
+                else np.asarray(light_position, float).tobytes()
+            )
+        ).hexdigest()[:16]
+        path = None if self.cache is None else self.cache / f"{self._key}_{key}.npz"
+        if path is not None and path.is_file():
+            return np.load(path)["shading"].astype(np.float32)
+        scene, params = self._posed(pose, light_position)
+        chunks = -(-self.n_patches // 3)
+        out = np.zeros((3 * chunks, self.intrinsics.height, self.intrinsics.width), np.float32)
+        for j in range(chunks):
+            params["object.vertex_color"] = np.ravel(self._indicators(j))
+            params.update()
+            img = np.asarray(self.mi.render(scene, spp=self.spp, seed=j), dtype=np.float32)
+            out[3 * j : 3 * j + 3] = np.moveaxis(img, 2, 0)
+        out = out[: self.n_patches]
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_suffix(".tmp.npz")
+            np.savez_compressed(tmp, shading=out.astype(np.float16))
+            tmp.replace(path)
+        return out
+
+    def render_white(self, pose: Pose, light_position: np.ndarray | None) -> np.ndarray:
+        """One render with every patch white (H, W): the linearity check of the indicators."""
+        scene, params = self._posed(pose, light_position)
+        params["object.vertex_color"] = np.ones(3 * len(self.patch), dtype=np.float32)
+        params.update()
+        return np.asarray(self.mi.render(scene, spp=self.spp, seed=0), dtype=np.float32)[..., 0]
+
+
+def compose(shading: np.ndarray, patch_rgb: np.ndarray) -> np.ndarray:
+    """Camera RGB (H, W, 3) = Σ_k shading_k · rgb_k, with ``patch_rgb`` (K, 3) the
+    ``Cᵀ diag(L) ρ_k`` of each patch."""
+    return np.einsum("khw,kc->hwc", shading, patch_rgb, optimize=True)

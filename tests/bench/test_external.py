@@ -1,0 +1,104 @@
+"""The external-renderer scenes: Mitsuba's shading images against the analytic shading of a
+flat plate, linearity of the indicator composition, and a tiny session whose DNGs the decode
+stage reads back as the composed image."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mitsuba")
+
+from bench.external_render import ShadingRenderer, compose
+from bench.external_scene import SceneSpec
+from bench.external_session import Size, build_session
+from reconstruct import decode
+from reconstruct.camera import Intrinsics, Pose, project
+from reconstruct.decode import decode_raw
+
+
+def plate(n: int = 41, half: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A flat square in z = 0 facing +z: patch 0 where x < 0, patch 1 where x >= 0."""
+    g = np.linspace(-half, half, n)
+    x, y = np.meshgrid(g, g)
+    vertices = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
+    i = np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]
+    a, b, c, d = i.ravel(), i.ravel() + 1, i.ravel() + n, i.ravel() + n + 1
+    faces = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+    return vertices, faces, (vertices[:, 0] >= 0).astype(np.int64)
+
+
+@pytest.fixture(scope="module")
+def plate_render() -> tuple[ShadingRenderer, Pose, np.ndarray]:
+    vertices, faces, patch = plate()
+    intr = Intrinsics.pinhole(64, 48, 60.0)
+    pose = Pose.look_at(np.array([0.03, -0.02, 0.3]), np.zeros(3), up=(0.0, 1.0, 0.0))
+    return ShadingRenderer(vertices, faces, patch, intr, spp=16), pose, patch
+
+
+def test_plate_matches_analytic_shading(
+    plate_render: tuple[ShadingRenderer, Pose, np.ndarray],
+) -> None:
+    renderer, pose, _ = plate_render
+    light = pose.light_position(np.array([0.05, 0.0, 0.0]))
+    shading = renderer.render(pose, light)
+    intr = renderer.intrinsics
+    v, u = np.mgrid[0 : intr.height, 0 : intr.width] + 0.5
+    rays = pose.R.T @ intr.pixel_rays(np.stack([u.ravel(), v.ravel()], 1)).T  # world dirs
+    c = pose.center
+    t = -c[2] / rays[2]
+    points = c + (rays * t).T
+    d = light - points
+    dist = np.linalg.norm(d, axis=1)
+    analytic = (d[:, 2] / dist / dist**2).reshape(intr.height, intr.width)
+    x = points[:, 0].reshape(intr.height, intr.width)
+    y = points[:, 1].reshape(intr.height, intr.width)
+    inside = (np.abs(x) < 0.09) & (np.abs(y) < 0.09)
+    left, right = inside & (x < -0.01), inside & (x > 0.01)  # away from the patch boundary
+    assert left.sum() > 100 and right.sum() > 100
+    np.testing.assert_allclose(shading[0][left], analytic[left], rtol=0.01)
+    np.testing.assert_allclose(shading[1][right], analytic[right], rtol=0.01)
+    assert np.all(shading[0][right] == 0) and np.all(shading[1][left] == 0)
+    # the world point Mitsuba shows at a pixel is where our camera model projects it
+    uv = project(intr, pose, np.array([[-0.05, 0.0, 0.0], [0.05, 0.0, 0.0]]))
+    iu, iv = uv.astype(int).T
+    assert shading[0][iv[0], iu[0]] > 0 and shading[1][iv[1], iu[1]] > 0
+
+
+def test_indicator_renders_sum_to_the_white_render(
+    plate_render: tuple[ShadingRenderer, Pose, np.ndarray],
+) -> None:
+    renderer, pose, _ = plate_render
+    for light in (pose.light_position(np.array([0.05, 0.0, 0.0])), None):
+        shading = renderer.render(pose, light)
+        white = renderer.render_white(pose, light)
+        assert white.max() > 0
+        np.testing.assert_allclose(shading.sum(axis=0), white, rtol=1e-5, atol=1e-6)
+    rgb = np.array([[1.0, 0.0, 0.5], [0.0, 2.0, 0.5]])
+    composed = compose(shading, rgb)
+    np.testing.assert_allclose(composed[..., 2], 0.5 * white, rtol=1e-5, atol=1e-6)
+
+
+def test_tiny_session_decodes_to_the_composed_image(shared_data: Path, tmp_path: Path) -> None:
+    spec = SceneSpec(
+        "smoke",
+        "spot.obj",
+        {"L1": "Sunwayfoto.LED.FL96.at.3000K", "L2": "Sunwayfoto.LED.FL96.at.5500K"},
+        "Nikon D700",
+        (0.8, 1.2),
+        (30.0,),
+    )
+    size = Size(width=64, height=48, focal_px=112.0, views=4, spp=16, ambient=0.05)
+    session = build_session(spec, size, tmp_path, shared_data, tmp_path / "cache")
+    raws = sorted((session / "raw").glob("*.dng"))
+    assert len(raws) == 4 * 3  # ambient + two lamps per view
+    assert (session / "poses" / "images.txt").is_file()
+    assert (session / "ground_truth" / "reflectance.npy").is_file()
+    lit, _ = decode_raw(next(p for p in raws if p.name.endswith("_L1.dng")), "linear", 0.98)
+    amb, _ = decode_raw(next(p for p in raws if p.name.endswith("_ambient.dng")), "linear", 0.98)
+    assert lit.shape == (48, 64, 3)
+    assert lit.mean() > 5 * amb.mean() > 0  # the bulb dominates, the ambient is there
+    decoded = decode.run({}, session, tmp_path / "decoded")  # rig reconstruct's decode stage
+    assert len(sorted(Path(decoded).glob("frame_*_sat.npy"))) == 12
