@@ -23,6 +23,11 @@ from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
 from reconstruct.optimise.problem import Frames, LightMode, Observations, Problem, Rig, Weights
 from reconstruct.optimise.sampling import bilinear, taps_valid
 from reconstruct.optimise.solver import IterationRecord, SolverSettings, levenberg_marquardt
+from reconstruct.optimise.uncertainty import (
+    VertexUncertainty,
+    reflectance_prior,
+    vertex_uncertainty,
+)
 from reconstruct.optimise.weights import edge_scale, photometric_weights
 from reconstruct.raycast import RayCaster
 
@@ -75,6 +80,10 @@ class OptimiseSettings:
     # bilinear taps straddle the silhouette and mix in the background.
     min_view_cos: float = 0.3
     shadow_eps: float = 1e-4
+    # Per-vertex reflectance std (optimise/uncertainty.py): "training" puts the spread of real
+    # reflectances on what the camera does not see (calibrated on the sim); "regularisers"
+    # reads the smoothness terms as the prior (plain Gauss–Newton: over-confident).
+    uncertainty_prior: str = "training"
     solver: SolverSettings = field(default_factory=SolverSettings)
 
     @classmethod
@@ -110,6 +119,11 @@ class OptimiseSettings:
         if out.light_mode not in ("offset", "free", "fixed"):
             raise RigError(
                 f"{where}: light_mode {out.light_mode!r} is unknown", "use offset, free or fixed"
+            )
+        if out.uncertainty_prior not in ("training", "regularisers"):
+            raise RigError(
+                f"{where}: uncertainty_prior {out.uncertainty_prior!r} is unknown",
+                "use training or regularisers",
             )
         if out.robust not in ("none", "huber", "cauchy"):
             raise RigError(
@@ -151,6 +165,7 @@ class OptimiseResult:
     history: list[dict[str, Any]]
     stage_seconds: dict[str, float]
     initial_alpha: np.ndarray
+    uncertainty: VertexUncertainty | None = None  # at the final θ (optimise/uncertainty.py)
 
 
 Progress = Callable[[str, IterationRecord], None]
@@ -421,6 +436,17 @@ def optimise(
         log.info("outer %d: vertices moved ≤ %.3g m, light ≤ %.3g m", outer, moved, light_moved)
         if moved <= tol and light_moved <= cfg.settle_light_m:
             break
+    t0 = time.perf_counter()
+    solved = cfg.optimise_positions and cfg.outer_iterations > 0
+    o = problem.obs
+    views = np.bincount(o.vertex[o.pair_start], minlength=problem.n_vertices)
+    uncertainty = vertex_uncertainty(
+        JointCost(problem, cfg.robust, cfg.robust_scale),
+        theta,
+        (views >= max(cfg.min_views, 1)) & solved,
+        reflectance_prior(inp.basis) if cfg.uncertainty_prior == "training" else None,
+    )
+    seconds["uncertainty"] = time.perf_counter() - t0
     X, A, light = problem.unpack(theta)
     return OptimiseResult(
         vertices=X.copy(),
@@ -434,4 +460,5 @@ def optimise(
         history=history,
         stage_seconds=seconds,
         initial_alpha=A0,
+        uncertainty=uncertainty,
     )
