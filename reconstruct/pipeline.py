@@ -262,7 +262,7 @@ def export_result(
         figures.append(
             plots.error_histogram(
                 recon_dir / "uncertainty.png",
-                np.nanmean(std, axis=1),
+                np.mean(std, axis=1),  # NaN rows (unobserved) are left out
                 "per-vertex reflectance std (mean over wavelengths)",
             )
         )

@@ -12,6 +12,14 @@ normal (the solver's ``position_motion: normal``; positions the solve kept fixed
   with ``s² / |V(i)|`` — the priors are read at the same per-vertex scale as in the cost;
 * ``Σ_α`` maps to a per-wavelength std ``sqrt(diag(B Σ_α Bᵀ))``; the position std is ``sqrt(Σ_tt)``.
 
+Read as a prior, the smoothness regularisers claim far too much: 2 illuminations × 3 channels
+see fewer directions than the N_b basis weights, the regularisers fill the rest, and their error
+there (the metamer bias) dominates the actual error, while the plain covariance is smallest where
+that bias is. So by default (``optimise.uncertainty_prior: training``) the reflectance covariance
+is the data blocks (regularisers out) plus a Gaussian prior with the covariance of the basis
+weights of the training reflectances: directions the camera sees get the noise, directions it
+does not see keep the spread of real surfaces. The plain one stays as ``reflectance_std_gn``.
+
 What this neglects (docs/usage-reconstruct.md): the coupling between vertices (neighbours held
 at their estimates: a conditional, not marginal, covariance, so smoothing-dominated vertices look
 surer than they are), the light's and the poses' uncertainty, calibration errors (camera

@@ -119,3 +119,37 @@ def test_sim_room_light_config_errors_name_the_key():
         SimRig({"scene": "blob", "subdivisions": 2, "ambient": {"levle": 0.1}})
     with pytest.raises(RigError, match="level -1"):
         SimRig({"scene": "blob", "subdivisions": 2, "ambient": {"level": -1}})
+
+
+def _decoded(folder, view: int, label: str, image: np.ndarray, exposure_s: float):
+    from reconstruct.decode import DecodedFrame
+
+    stem = f"v{view}_{label}"
+    np.save(folder / f"{stem}.npy", image.astype(np.float32))
+    np.save(folder / f"{stem}_sat.npy", np.zeros(image.shape[:2], dtype=bool))
+    h, w = image.shape[:2]
+    return DecodedFrame(
+        0, view, label, f"{stem}.npy", f"{stem}_sat.npy", "x.dng", exposure_s, 100.0, h, w, 0.0
+    )
+
+
+def test_pipeline_subtracts_the_views_ambient_frame(tmp_path, pair):
+    from types import SimpleNamespace
+
+    from reconstruct.pipeline import lit_frame
+
+    dark, room = pair
+    assert room.ambient_images is not None and room.frames.images is not None
+    assert dark.frames.images is not None
+    frames = {
+        (0, "LED1"): _decoded(tmp_path, 0, "LED1", room.frames.images[0], 0.5),
+        (0, "ambient"): _decoded(tmp_path, 0, "ambient", room.ambient_images[0] / 4, 0.125),
+        (1, "LED1"): _decoded(tmp_path, 1, "LED1", room.frames.images[2], 0.5),
+    }
+    front = SimpleNamespace(frames=frames, decoded_dir=tmp_path)
+    image, sat, weight = lit_frame(front, (0, "LED1"))  # type: ignore[arg-type]
+    np.testing.assert_allclose(image, dark.frames.images[0], atol=1e-5)
+    assert weight < 1.0 and not sat.any()
+    image, _, weight = lit_frame(front, (1, "LED1"))  # type: ignore[arg-type]
+    np.testing.assert_array_equal(image, room.frames.images[2])  # no ambient frame: as is
+    assert weight == 1.0
