@@ -9,6 +9,8 @@ and per vertex over all bands), the calibration curve and the Spearman rank corr
 the predicted std and the actual error.
 
     python -m bench.ambient_uncertainty --out bench/results/ambient_uncertainty
+
+Writes ``OUT/results.json`` (all numbers) and ``OUT/calibration.png``.
 """
 
 from __future__ import annotations
@@ -115,7 +117,10 @@ def main() -> None:
     ap.add_argument("--noise", type=float, default=0.003)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=Path("bench/results/ambient_uncertainty"))
+    ap.add_argument("--quick", action="store_true", help="smoke size: 162 vertices, 6 views")
     args = ap.parse_args()
+    if args.quick:
+        args.subdivisions, args.views = 2, 6
     common = dict(n_views=args.views, image_size=(320, 240), noise=args.noise, seed=args.seed)
     dark = make_scene(args.subdivisions, **common)  # type: ignore[arg-type]
     room = make_scene(args.subdivisions, ambient=args.level, **common)  # type: ignore[arg-type]
