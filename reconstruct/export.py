@@ -2,9 +2,13 @@
 
 * ``mesh.ply`` — binary little-endian PLY: ``x y z`` (float, metres), ``nx ny nz`` (float),
   ``red green blue`` (uchar, sRGB of the reflectance under D65) and ``refl_400 … refl_700``
-  (float, the reflectance per grid wavelength), triangle faces as ``vertex_indices``;
+  (float, the reflectance per grid wavelength), with an uncertainty ``refl_std_400 …
+  refl_std_700`` and ``position_std_m`` (float, NaN where not estimated), triangle faces as
+  ``vertex_indices``;
 * ``reflectance.npz`` — ``vertices`` (N, 3), ``faces`` (F, 3), ``wavelengths_nm`` (N_λ,),
-  ``reflectance`` (N, N_λ), ``alpha`` (N, N_b), ``basis`` (N_λ, N_b), ``normals``, ``observed``;
+  ``reflectance`` (N, N_λ), ``alpha`` (N, N_b), ``basis`` (N_λ, N_b), ``normals``, ``observed``,
+  with an uncertainty ``reflectance_std`` (N, N_λ) and ``position_std_m`` (N,) (std along the
+  normal; NaN where not estimated);
 * ``report.json`` — see :func:`write_report`.
 """
 
@@ -12,6 +16,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -42,8 +47,10 @@ def write_ply(
     normals: np.ndarray,
     reflectance: np.ndarray,
     wavelengths_nm: np.ndarray,
+    extra: Mapping[str, np.ndarray] | None = None,
 ) -> Path:
-    """Binary PLY with per-vertex sRGB (D65) and the spectral reflectance as float properties."""
+    """Binary PLY with per-vertex sRGB (D65) and the spectral reflectance as float properties;
+    ``extra``: more float vertex properties by name, (N,) each."""
     n = len(vertices)
     wl = [int(round(w)) for w in np.asarray(wavelengths_nm)]
     if reflectance.shape != (n, len(wl)):
@@ -59,6 +66,7 @@ def write_ply(
         [(k, "<f4") for k in ("x", "y", "z", "nx", "ny", "nz")]
         + [(k, "u1") for k in ("red", "green", "blue")]
         + [(f"refl_{w}", "<f4") for w in wl]
+        + [(k, "<f4") for k in extra or {}]
     )
     vert = np.empty(n, dtype=vtype)
     for k, name in enumerate("xyz"):
@@ -68,6 +76,8 @@ def write_ply(
         vert[name] = rgb8[:, k]
     for k, w in enumerate(wl):
         vert[f"refl_{w}"] = reflectance[:, k]
+    for name, values in (extra or {}).items():
+        vert[name] = values
     ftype = np.dtype([("count", "u1"), ("i", "<i4", (3,))])
     face = np.empty(len(faces), dtype=ftype)
     face["count"] = 3
@@ -81,6 +91,7 @@ def write_ply(
     header += [f"property float {k}" for k in ("x", "y", "z", "nx", "ny", "nz")]
     header += [f"property uchar {k}" for k in ("red", "green", "blue")]
     header += [f"property float refl_{w}" for w in wl]
+    header += [f"property float {k}" for k in extra or {}]
     header += [f"element face {len(faces)}", "property list uchar int vertex_indices", "end_header"]
     data = ("\n".join(header) + "\n").encode("ascii") + vert.tobytes() + face.tobytes()
     _atomic(path, data)
@@ -97,19 +108,22 @@ def write_reflectance_npz(
     alpha: np.ndarray,
     basis: np.ndarray,
     observed: np.ndarray,
+    uncertainty: Mapping[str, np.ndarray] | None = None,
 ) -> Path:
+    """``uncertainty``: ``reflectance_std`` and ``position_std_m`` arrays, when estimated."""
     tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez_compressed(
-        tmp,
-        vertices=vertices,
-        faces=faces,
-        normals=normals,
-        wavelengths_nm=wavelengths_nm,
-        reflectance=reflectance,
-        alpha=alpha,
-        basis=basis,
-        observed=observed,
-    )
+    arrays = {
+        "vertices": vertices,
+        "faces": faces,
+        "normals": normals,
+        "wavelengths_nm": wavelengths_nm,
+        "reflectance": reflectance,
+        "alpha": alpha,
+        "basis": basis,
+        "observed": observed,
+        **dict(uncertainty or {}),
+    }
+    np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]
     os.replace(tmp, path)
     return path
 

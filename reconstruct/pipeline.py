@@ -30,6 +30,7 @@ from calibration.grid import DEFAULT_GRID
 from calibration.store import CalibrationStore
 from calibration.yamlio import read_yaml
 from reconstruct import export, plots
+from reconstruct.ambient import AMBIENT, exposure_ratio, subtract_ambient
 from reconstruct.camera import Intrinsics
 from reconstruct.decode import load_frame
 from reconstruct.forward import response_matrix
@@ -134,6 +135,26 @@ def _scaled(intr: Intrinsics, width: int, height: int) -> Intrinsics:
     return Intrinsics(intr.model, width, height, params)
 
 
+def lit_frame(front: FrontResult, key: tuple[int, str]) -> tuple[np.ndarray, np.ndarray, float]:
+    """A lit frame (image, saturation mask, noise weight), with the view's ambient frame
+    subtracted when the session has one (:mod:`reconstruct.ambient`)."""
+    frame = front.frames[key]
+    img, sat = load_frame(front.decoded_dir, frame)
+    amb = front.frames.get((key[0], AMBIENT))
+    if amb is None:
+        return img, sat, 1.0
+    amb_img, amb_sat = load_frame(front.decoded_dir, amb)
+    if amb_img.shape != img.shape:
+        raise RigError(
+            f"ambient frame {amb.image} is {amb_img.shape[1]}x{amb_img.shape[0]} but lit frame "
+            f"{frame.image} is {img.shape[1]}x{img.shape[0]}",
+            "capture the ambient frame with the same camera and image size",
+        )
+    ratio = exposure_ratio(frame.exposure_s, frame.iso, amb.exposure_s, amb.iso)
+    out = subtract_ambient(img, ~sat, amb_img, ~amb_sat, ratio, f"view {key[0]} {key[1]}")
+    return out.image, ~out.valid, out.weight
+
+
 def optimiser_input(front: FrontResult, session: Session, basis: SpectralBasis) -> OptimiseInput:
     """Arrays the optimiser needs from the front's outputs and the calibration snapshot."""
     views = sorted(front.poses)
@@ -149,17 +170,19 @@ def optimiser_input(front: FrontResult, session: Session, basis: SpectralBasis) 
     names = sorted({k[1] for k in keys})
     camera, spds = session_spectra(session, names)
     responses = np.stack([response_matrix(camera, spds[n]) for n in names])
-    images, valid = [], []
+    images, valid, weight = [], [], []
     for key in keys:
-        img, sat = load_frame(front.decoded_dir, front.frames[key])
+        img, sat, wt = lit_frame(front, key)
         images.append(img)
         valid.append(~sat)
+        weight.append(wt)
     h, w = images[0].shape[:2]
     frames = Frames(
         np.array([column[k[0]] for k in keys]),
         np.array([names.index(k[1]) for k in keys]),
         np.stack(images).astype(np.float32),
         np.stack(valid),
+        np.array(weight),
     )
     intr = [_scaled(front.intrinsics[v], w, h) for v in views]
     rig = Rig(intr, [front.poses[v] for v in views], responses)
@@ -193,8 +216,29 @@ def export_result(
     recon_dir.mkdir(parents=True, exist_ok=True)
     wl = inp.basis.wavelengths_nm
     normals, _ = vertex_normals(result.vertices, result.faces)
+    unc = result.uncertainty
+    std = None if unc is None else unc.reflectance_std
+    arrays = (
+        {}
+        if unc is None
+        else {"reflectance_std": unc.reflectance_std, "position_std_m": unc.position_std_m}
+    )
+    ply_extra = (
+        {}
+        if unc is None
+        else {
+            **{f"refl_std_{round(w)}": unc.reflectance_std[:, k] for k, w in enumerate(wl)},
+            "position_std_m": unc.position_std_m,
+        }
+    )
     mesh_path = export.write_ply(
-        recon_dir / export.MESH_FILE, result.vertices, result.faces, normals, result.reflectance, wl
+        recon_dir / export.MESH_FILE,
+        result.vertices,
+        result.faces,
+        normals,
+        result.reflectance,
+        wl,
+        ply_extra,
     )
     npz = export.write_reflectance_npz(
         recon_dir / export.REFLECTANCE_FILE,
@@ -206,6 +250,7 @@ def export_result(
         result.alpha,
         inp.basis.B,
         result.observed,
+        arrays,
     )
     rig = inp.rig
     figures = [
@@ -224,8 +269,17 @@ def export_result(
             result.reflectance,
             sample,
             initial=inp.basis.reconstruct(result.initial_alpha),
+            std=std,
         )
     )
+    if std is not None:
+        figures.append(
+            plots.error_histogram(
+                recon_dir / "uncertainty.png",
+                np.mean(std, axis=1),  # NaN rows (unobserved) are left out
+                "per-vertex reflectance std (mean over wavelengths)",
+            )
+        )
     caster = RayCaster(result.vertices, result.faces)
     for c in np.linspace(0, rig.n_views - 1, min(preview_views, rig.n_views)).astype(int):
         img = relight(
@@ -256,6 +310,7 @@ def export_result(
         "faces": len(result.faces),
         "observed_vertices": int(result.observed.sum()),
         "observations": result.n_observations,
+        "uncertainty": None if unc is None else unc.summary(),
         "history": result.history,
         "timings_s": {**extra.pop("timings_s", {}), **result.stage_seconds},
         "settings": asdict(settings),

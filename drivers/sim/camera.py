@@ -136,6 +136,7 @@ class SimCamera:
         self._hits: tuple[bytes, render.ViewHits] | None = None
         self._weights: dict[tuple[bytes, ...], np.ndarray] = {}
         self._rgb: dict[bytes, np.ndarray] = {}
+        self.ambient_spd: np.ndarray | None = None  # room light in every frame (sim.ambient)
 
     def describe(self) -> dict[str, Any]:
         return {
@@ -206,6 +207,8 @@ class SimCamera:
             terms += [
                 (w[:, k], self._vertex_rgb(proj.primary_spds[c])) for k, c in enumerate("rgb")
             ]
+        if self.ambient_spd is not None:
+            terms.append((np.ones(len(hits.index)), self._vertex_rgb(self.ambient_spd)))
         return render.shade_vertex_rgb(hits, terms)
 
     def _vertex_rgb(self, spd: np.ndarray) -> np.ndarray:

@@ -16,7 +16,9 @@ Config keys (all optional): ``scene`` (blob | torus | chart, or a folder written
 ``view_spread_deg``), ``illuminations``, ``ground`` (a textured plane at z = 0 the object
 stands on, e.g. a printed marker board: ``texture`` (H, W) array or ``.npy`` path in [0, 1],
 ``extent`` [x0, y0, x1, y1] metres, ``paper`` and ``ink`` reflectances (a number or one value
-per wavelength); the scene is lifted to stand on it and the cameras aim at its middle).
+per wavelength); the scene is lifted to stand on it and the cameras aim at its middle),
+``ambient`` (a room light in every frame: ``level``, ``spd``, ``distance_m``, see
+:mod:`drivers.sim.ambient`).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ import numpy as np
 import yaml
 
 from calibration.errors import RigError
+from drivers.sim.ambient import room_spd
 from drivers.sim.camera import SensorConfig, SimCamera
 from drivers.sim.config_keys import reject_unknown_keys
 from drivers.sim.light import SimLight
@@ -57,6 +60,7 @@ _KEYS = {
     "projector",
     "illuminations",
     "ground",
+    "ambient",
 }
 _PROJECTOR_DEFAULTS: dict[str, Any] = {
     "width": 800,
@@ -119,6 +123,9 @@ class SimRig:
         )
         self.camera = SimCamera(
             self.scene, self.light, self.projector, self.sensor, self.seed, ground=self.ground
+        )
+        self.camera.ambient_spd = room_spd(
+            conf.get("ambient"), self.light, self.trajectory.radius_m
         )
         self.spectrometer = SimSpectrometer(
             lambda: self.light.spd() + self.projector.spd(), seed=self.seed

@@ -6,7 +6,8 @@ Residual blocks (E = Σ r², the paper's cost with no ½):
 * rendering (eq. 2, 12): per observation o = (vertex i, frame f), 3 channels,
   ``r_o = k (y(x_i, α_i, p_c) − y_obs(π_c(x_i))) / sqrt(|V(i)|)``; y from
   :mod:`reconstruct.forward`, y_obs sampled bilinearly at the vertex's projection (disparity cue),
-  k the rendering unit (``Weights.rendering_scale``);
+  k the rendering unit (``Weights.rendering_scale``) times the frame's noise weight
+  (``Frames.weight``, below 1 where an ambient frame was subtracted);
 * spectral smoothness (eq. 14): ``sqrt(γ1) R_s α_i`` with ``R_sᵀR_s = (D B)ᵀ(D B)``;
 * photometric smoothness (eq. 15): ``sqrt(2 γ2 w_ij) R_b (α_i − α_j)`` per undirected edge with
   ``R_bᵀR_b = BᵀB`` (the paper's double sum visits each edge twice);
@@ -139,6 +140,8 @@ class JointCost:
         self.lap_diag = self.laplacian.diagonal()
         o = p.obs
         self.obs_weight = p.weights.rendering_scale / np.sqrt(np.maximum(o.per_vertex[o.vertex], 1))
+        if p.frames.weight is not None:  # noisier (ambient-subtracted) frames count less
+            self.obs_weight = self.obs_weight * np.asarray(p.frames.weight, dtype=float)[o.frame]
         self.light_index = np.zeros(o.count, dtype=np.int64) if p.light_mode == "offset" else o.view
         self.light_maps = p.light_maps()  # ∂p_c/∂θ_light (N_views, 3, 3)
         # (vertex, view) pairs: the geometry of one pair is shared by that view's frames.

@@ -24,12 +24,15 @@ LightMode = Literal["offset", "free"]
 @dataclass
 class Frames:
     """Captured frames: which view (pose) and illumination each is, and optionally the linear
-    images (F, H, W, 3) with their validity masks (F, H, W) (False = saturated/unusable)."""
+    images (F, H, W, 3) with their validity masks (F, H, W) (False = saturated/unusable) and a
+    relative noise weight per frame (F,) — 1/std relative to a frame with no ambient
+    subtracted (:mod:`reconstruct.ambient`); None: all 1."""
 
     view: np.ndarray
     illumination: np.ndarray
     images: np.ndarray | None = None
     valid: np.ndarray | None = None
+    weight: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.view = np.asarray(self.view, dtype=np.int64)

@@ -25,6 +25,11 @@ from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
 from reconstruct.optimise.problem import Frames, LightMode, Observations, Problem, Rig, Weights
 from reconstruct.optimise.sampling import bilinear, taps_valid
 from reconstruct.optimise.solver import IterationRecord, SolverSettings, levenberg_marquardt
+from reconstruct.optimise.uncertainty import (
+    VertexUncertainty,
+    reflectance_prior,
+    vertex_uncertainty,
+)
 from reconstruct.optimise.weights import edge_scale, photometric_weights
 from reconstruct.raycast import RayCaster
 
@@ -77,6 +82,10 @@ class OptimiseSettings:
     # bilinear taps straddle the silhouette and mix in the background.
     min_view_cos: float = 0.3
     shadow_eps: float = 1e-4
+    # Per-vertex reflectance std (optimise/uncertainty.py): "training" puts the spread of real
+    # reflectances on what the camera does not see (calibrated on the sim); "regularisers"
+    # reads the smoothness terms as the prior (plain Gauss–Newton: over-confident).
+    uncertainty_prior: str = "training"
     solver: SolverSettings = field(default_factory=SolverSettings)
 
     @classmethod
@@ -125,6 +134,11 @@ class OptimiseSettings:
             raise RigError(
                 f"{where}: light_mode {out.light_mode!r} is unknown", "use offset, free or fixed"
             )
+        if out.uncertainty_prior not in ("training", "regularisers"):
+            raise RigError(
+                f"{where}: uncertainty_prior {out.uncertainty_prior!r} is unknown",
+                "use training or regularisers",
+            )
         if out.robust not in ("none", "huber", "cauchy"):
             raise RigError(
                 f"{where}: robust loss {out.robust!r} is unknown", "use none, huber or cauchy"
@@ -165,6 +179,7 @@ class OptimiseResult:
     history: list[dict[str, Any]]
     stage_seconds: dict[str, float]
     initial_alpha: np.ndarray
+    uncertainty: VertexUncertainty | None = None  # at the final θ (optimise/uncertainty.py)
 
 
 Progress = Callable[[str, IterationRecord], None]
@@ -415,11 +430,10 @@ def optimise(
         log.info("resuming the optimisation after stage %d (%s)", state.stage, checkpoint)
         history[:], A0 = state.history, state.initial_alpha
         seconds.update(state.seconds)
-        if state.done:
-            return _result(inp, cfg, state.vertices, state.alpha, state.light, state, A0, history)
         problem = build_problem(inp, state.vertices, state.light, cfg)
         theta = problem.pack(state.vertices, state.alpha, state.light)
-        first_outer = state.stage + 1
+        # a finished solve goes straight to its uncertainty and the result
+        first_outer = last_outer + 1 if state.done else state.stage + 1
     else:
         t0 = time.perf_counter()
         A0 = np.zeros((len(X), nb)) if inp.initial_alpha is None else np.asarray(inp.initial_alpha)
@@ -467,11 +481,22 @@ def optimise(
         save(outer, settled, theta, problem)
         if settled:
             break
+    t0 = time.perf_counter()
+    solved = cfg.optimise_positions and cfg.outer_iterations > 0
+    o = problem.obs
+    views = np.bincount(o.vertex[o.pair_start], minlength=problem.n_vertices)
+    uncertainty = vertex_uncertainty(
+        JointCost(problem, cfg.robust, cfg.robust_scale),
+        theta,
+        (views >= max(cfg.min_views, 1)) & solved,
+        reflectance_prior(inp.basis) if cfg.uncertainty_prior == "training" else None,
+    )
+    seconds["uncertainty"] = time.perf_counter() - t0
     X, A, light = problem.unpack(theta)
     final = OptimiseState(
         0, True, X, A, light, A0, problem.obs.per_vertex > 0, problem.obs.count, history, seconds
     )
-    return _result(inp, cfg, X, A, light, final, A0, history)
+    return _result(inp, cfg, X, A, light, final, A0, history, uncertainty)
 
 
 def _result(
@@ -483,6 +508,7 @@ def _result(
     state: OptimiseState,
     A0: np.ndarray,
     history: list[dict[str, Any]],
+    uncertainty: VertexUncertainty,
 ) -> OptimiseResult:
     return OptimiseResult(
         vertices=X.copy(),
@@ -496,4 +522,5 @@ def _result(
         history=history,
         stage_seconds=state.seconds,
         initial_alpha=A0,
+        uncertainty=uncertainty,
     )

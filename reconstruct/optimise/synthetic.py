@@ -17,6 +17,7 @@ import trimesh
 from calibration.basis import SpectralBasis, default_basis
 from calibration.defaults import (
     camera_sensitivity,
+    cie_illuminant,
     default_illuminations,
     illumination_spd,
     rgbcw_channel_spds,
@@ -28,7 +29,7 @@ from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.problem import Frames, Rig
 from reconstruct.optimise.steps import OptimiseInput
 from reconstruct.raycast import RayCaster
-from reconstruct.render import render_image
+from reconstruct.render import render_image, shade, trace_view
 
 
 @dataclass
@@ -43,6 +44,7 @@ class SyntheticScene:
     basis: SpectralBasis
     visibility: np.ndarray  # (N, N_views)
     observed: np.ndarray  # (N, F, 3), NaN where not visible
+    ambient_images: np.ndarray | None = None  # (N_views, H, W, 3) bulb-off frames (room light)
 
     def input(self, vertices: np.ndarray | None = None, images: bool = False) -> OptimiseInput:
         """Optimiser input starting from ``vertices`` (default: the truth)."""
@@ -69,6 +71,19 @@ def default_responses(illuminations: Sequence[str]) -> np.ndarray:
     )
 
 
+def ambient_response(
+    illuminations: Sequence[str], level: float, distance_m: float, spd: str = "A"
+) -> np.ndarray:
+    """(3, N_λ) response of a uniform room light (CIE illuminant ``spd``) whose irradiance is
+    ``level`` × the bulb's mean over ``illuminations`` at ``distance_m`` (normal incidence)."""
+    channels = rgbcw_channel_spds()
+    named = default_illuminations()
+    bulb = np.mean([illumination_spd(named[k], channels).sum() for k in illuminations])
+    room = cie_illuminant(spd)
+    room = room * (level * bulb / distance_m**2 / room.sum())
+    return response_matrix(camera_sensitivity(), room)
+
+
 def bumpy_sphere(
     subdivisions: int = 3, radius: float = 0.05, bumps: float = 0.06
 ) -> trimesh.Trimesh:
@@ -86,9 +101,13 @@ def make_scene(
     noise: float = 0.0,
     image_size: tuple[int, int] | None = None,
     seed: int = 0,
+    ambient: float = 0.0,
 ) -> SyntheticScene:
     """A bumpy sphere (radius 5 cm) seen from ``n_views`` cameras 30 cm away, each view under
-    every illumination; ``image_size`` (W, H) also renders images for the sampling path."""
+    every illumination; ``image_size`` (W, H) also renders images for the sampling path.
+    ``ambient`` > 0 (images only) adds a uniform illuminant-A room light of that level
+    relative to the bulb at the camera distance to every frame, and one bulb-off frame per
+    view (``ambient_images``), each with its own noise."""
     rng = np.random.default_rng(seed)
     mesh = bumpy_sphere(subdivisions)
     X, F = np.asarray(mesh.vertices), np.asarray(mesh.faces)
@@ -120,6 +139,15 @@ def make_scene(
     images = None
     if image_size is not None:
         images = np.zeros((len(frame_view), h, w, 3), dtype=np.float32)
+    rooms = None
+    if images is not None and ambient > 0:
+        resp = ambient_response(illuminations, ambient, 0.3)
+        rooms = np.stack(
+            [
+                shade(hits, [(np.ones(len(hits.index)), resp)], refl)
+                for hits in (trace_view(caster, intr[c], poses[c]) for c in range(n_views))
+            ]
+        )
     for f in range(len(frame_view)):
         c, k = int(frame_view[f]), int(frame_ill[f])
         lit = ~caster.occluded(X, lights[c], 1e-5, normals)
@@ -130,10 +158,24 @@ def make_scene(
             img, _ = render_image(
                 X, F, refl, intr[c], poses[c], lights[c], responses[k], caster=caster
             )
-            images[f] = img + noise * rng.normal(size=img.shape)
+            room = 0.0 if rooms is None else rooms[c]
+            images[f] = img + room + noise * rng.normal(size=img.shape)
+    ambient_images = None
+    if rooms is not None:
+        ambient_images = (rooms + noise * rng.normal(size=rooms.shape)).astype(np.float32)
     frames = Frames(frame_view, frame_ill, images)
     return SyntheticScene(
-        X, F, refl, alpha, v, Rig(intr, poses, responses), frames, basis, vis, observed
+        X,
+        F,
+        refl,
+        alpha,
+        v,
+        Rig(intr, poses, responses),
+        frames,
+        basis,
+        vis,
+        observed,
+        ambient_images,
     )
 
 
