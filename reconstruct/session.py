@@ -159,6 +159,14 @@ def verify_frames(session_dir: Path, records: Iterable[FrameRecord]) -> list[Fra
     return problems
 
 
+def _planned_views(info: dict[str, Any]) -> int | None:
+    """The capture plan's view count, which bounds the manifest's ``view`` (sessions written
+    by other tools may have no plan)."""
+    plan = info.get("plan") if isinstance(info, dict) else None
+    views = plan.get("views") if isinstance(plan, dict) else None
+    return views if isinstance(views, int) and not isinstance(views, bool) and views > 0 else None
+
+
 @dataclass
 class Session:
     """A session directory opened for reading."""
@@ -168,7 +176,9 @@ class Session:
     frames: list[FrameRecord]
 
     @classmethod
-    def open(cls, root: Path) -> Session:
+    def open(cls, root: Path, bound_views: bool = True) -> Session:
+        """The session at ``root``; a manifest line naming a view beyond the plan is an error
+        unless ``bound_views`` is False (`rig session verify` lists such lines instead)."""
         root = Path(root)
         meta = root / SESSION_FILE
         if not meta.is_file():
@@ -183,7 +193,8 @@ class Session:
             raise RigError(
                 f"{meta} is not valid YAML: {problem}", "fix the file (repeated keys, syntax)"
             ) from exc
-        return cls(root, info, read_manifest(root))
+        n_views = _planned_views(info) if bound_views else None
+        return cls(root, info, read_manifest(root, n_views))
 
     @property
     def raw_dir(self) -> Path:

@@ -59,7 +59,7 @@ class PatchMatchConfig:
     min_consistent: int = 2
     max_normal_deg: float = 80.0  # planes seen more obliquely than this are not proposed
     poisson_depth: int = 9
-    poisson_trim: float = 7.0
+    poisson_trim: float = 5.0
     seed: int = 0
 
 

@@ -29,7 +29,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def handle_verify(args: argparse.Namespace) -> int:
-    session = Session.open(args.session)
+    session = Session.open(args.session, bound_views=False)
     console = Console(soft_wrap=True)
     problems = verify_frames(session.root, session.frames)
     problems += companion_problems(session)

@@ -83,6 +83,14 @@ def verify_after(edit: Callable[[Path], None]) -> Prepare:
     return prepare
 
 
+def reconstruct_after(edit: Callable[[Path], None]) -> Prepare:
+    def prepare(session: Path, tmp: Path) -> list[str]:
+        edit(session)
+        return ["reconstruct", str(session)]
+
+    return prepare
+
+
 def raw_line(data: bytes, at: int = 3) -> Callable[[Path], None]:
     def edit(session: Path) -> None:
         manifest = session / "manifest.jsonl"
@@ -129,6 +137,12 @@ MANIFEST_CASES = [
     Case(
         "view beyond the plan",
         resume_after(edit_line("view", 99)),
+        2,
+        (LINE, "`view` is 99", "0..1"),
+    ),
+    Case(
+        "view beyond the plan (reconstruct)",
+        reconstruct_after(edit_line("view", 99)),
         2,
         (LINE, "`view` is 99", "0..1"),
     ),
