@@ -108,9 +108,10 @@ def write_reflectance_npz(
     alpha: np.ndarray,
     basis: np.ndarray,
     observed: np.ndarray,
-    uncertainty: Mapping[str, np.ndarray] | None = None,
+    extra_arrays: Mapping[str, np.ndarray] | None = None,
 ) -> Path:
-    """``uncertainty``: ``reflectance_std`` and ``position_std_m`` arrays, when estimated."""
+    """``extra_arrays``: e.g. ``reflectance_std`` and ``position_std_m`` when estimated, and
+    ``initial_reflectance`` (the 2-D estimate the solve started from)."""
     tmp = path.with_name(path.name + ".tmp.npz")
     arrays = {
         "vertices": vertices,
@@ -121,7 +122,7 @@ def write_reflectance_npz(
         "alpha": alpha,
         "basis": basis,
         "observed": observed,
-        **dict(uncertainty or {}),
+        **dict(extra_arrays or {}),
     }
     np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]
     os.replace(tmp, path)

@@ -223,6 +223,8 @@ def export_result(
         if unc is None
         else {"reflectance_std": unc.reflectance_std, "position_std_m": unc.position_std_m}
     )
+    # the 2-D estimate the joint solve started from, for viewers comparing the two
+    arrays["initial_reflectance"] = inp.basis.reconstruct(result.initial_alpha)
     ply_extra = (
         {}
         if unc is None

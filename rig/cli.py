@@ -31,6 +31,7 @@ COMMANDS: tuple[str, ...] = (
     "evaluate",
     "board",
     "batch",
+    "view",
 )
 
 log = logging.getLogger("rig")

@@ -402,7 +402,7 @@ def test_a_corrupt_raw_frame_is_skipped_with_a_non_zero_exit(
     import sys
 
     sys.path.insert(0, str(Path(__file__).parent / "recon_safety"))
-    from tiny import make_session, reconstruct_args
+    from recon_tiny import make_session, reconstruct_args
 
     session, conf = make_session(tmp_path)
     capsys.readouterr()

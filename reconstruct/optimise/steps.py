@@ -493,9 +493,10 @@ def optimise(
     )
     seconds["uncertainty"] = time.perf_counter() - t0
     X, A, light = problem.unpack(theta)
-    final = OptimiseState(
-        0, True, X, A, light, A0, problem.obs.per_vertex > 0, problem.obs.count, history, seconds
-    )
+    observed, count = problem.obs.per_vertex > 0, problem.obs.count
+    if state is not None and state.done:  # as the finished solve saw them, not re-derived
+        observed, count = state.observed, state.n_observations
+    final = OptimiseState(0, True, X, A, light, A0, observed, count, history, seconds)
     return _result(inp, cfg, X, A, light, final, A0, history, uncertainty)
 
 

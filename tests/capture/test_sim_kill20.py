@@ -25,7 +25,7 @@ from rig.cli import main
 pytest.importorskip("drivers.sim")
 
 KILLS = 20
-VIEWS = 12  # 48 frames: room for 20 kills that each let about one frame through
+VIEWS = 30  # 120 frames: room for 20 kills even when a start-up kill lets several through
 
 
 def capture_child(args: list[str]) -> None:
