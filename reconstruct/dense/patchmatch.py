@@ -366,9 +366,10 @@ def patchmatch_points(
     span = conf.depth_range * float(np.ptp(hull_vertices, axis=0).max())
     views = sorted(v for v in masks if v in poses)
     srcs = source_views({v: poses[v] for v in views}, hull_vertices.mean(0), conf.sources)
-    small = {v: _resize(images[v], conf.scale) for v in views}
-    small_masks = {v: _resize(masks[v].astype(np.float32), conf.scale) > 0.5 for v in views}
-    intr_s = {v: scaled(intrinsics[v], conf.scale) for v in views}
+    pinhole = {v: undistorted(images[v], masks[v], intrinsics[v]) for v in views}
+    small = {v: _resize(pinhole[v][0], conf.scale) for v in views}
+    small_masks = {v: _resize(pinhole[v][1].astype(np.float32), conf.scale) > 0.5 for v in views}
+    intr_s = {v: scaled(pinhole[v][2], conf.scale) for v in views}
     maps: dict[int, ViewDepth] = {}
     for i, v in enumerate(views):
         sources = [(small[o], intr_s[o], poses[o]) for o in srcs[v]]
@@ -377,6 +378,27 @@ def patchmatch_points(
         if progress is not None:
             progress(i + 1, len(views))
     return fuse(maps, poses, srcs, conf)
+
+
+def undistorted(
+    image: np.ndarray, mask: np.ndarray, intr: Intrinsics
+) -> tuple[np.ndarray, np.ndarray, Intrinsics]:
+    """The image (H, W, I) and mask as a pinhole camera with the same K would see them (the
+    matching kernel projects with K alone, as COLMAP's PatchMatch works on undistorted
+    images)."""
+    K = intr.K
+    pinhole = Intrinsics("PINHOLE", intr.width, intr.height, (K[0, 0], K[1, 1], K[0, 2], K[1, 2]))
+    if not intr.distortion().any():
+        return image, mask, pinhole
+    K_cv = K.copy()
+    K_cv[:2, 2] -= 0.5  # OpenCV puts the top-left pixel's centre at 0, COLMAP at 0.5
+    map_x, map_y = cv2.initUndistortRectifyMap(
+        K_cv, intr.distortion(), None, K_cv, (intr.width, intr.height), cv2.CV_32FC1
+    )
+    channels = [cv2.remap(image[..., i].astype(np.float32), map_x, map_y, cv2.INTER_LINEAR)
+                for i in range(image.shape[2])]
+    warped_mask = cv2.remap(mask.astype(np.uint8), map_x, map_y, cv2.INTER_NEAREST) > 0
+    return np.stack(channels, axis=-1), warped_mask, pinhole
 
 
 def _resize(image: np.ndarray, scale: float) -> np.ndarray:

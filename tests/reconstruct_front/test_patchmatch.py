@@ -14,6 +14,7 @@ from reconstruct.dense.patchmatch import (
     patchmatch_view,
     scaled,
     source_views,
+    undistorted,
 )
 from reconstruct.raycast import RayCaster
 
@@ -97,3 +98,21 @@ def test_source_views_skip_views_without_parallax() -> None:
              for v, a in enumerate(np.radians([0, 1, 20, 40, 90]))}
     near = source_views(poses, np.zeros(3), 3, min_deg=4.0, max_deg=45.0)
     assert near[0] == [2, 3]  # 1° is no parallax, 90° is too far to match windows
+
+
+def test_undistorted_images_follow_the_pinhole_projection() -> None:
+    """A point seen at p_d by a RADIAL camera lies at the pinhole projection in the undistorted
+    image: what the matching kernel assumes."""
+    intr = Intrinsics("RADIAL", 320, 240, (300.0, 160.5, 120.2, -0.2, 0.05))
+    rr, cc = np.mgrid[0:240, 0:320].astype(float)
+    image = (np.sin(cc / 9.0) + np.cos(rr / 7.0))[..., None]
+    flat, mask, pinhole = undistorted(image, np.ones((240, 320), bool), intr)
+    assert pinhole.model == "PINHOLE" and pinhole.params == pytest.approx((300, 300, 160.5, 120.2))
+    points = np.array([[0.1, -0.05, 1.0], [-0.2, 0.1, 1.0], [0.15, 0.15, 1.0]])
+    p_d = intr.project_camera(points)
+    p_u = pinhole.project_camera(points)
+    # pixel-corner coordinates -> array indices (centre of the top-left pixel at 0.5)
+    original = map_coordinates(image[..., 0], [p_d[:, 1] - 0.5, p_d[:, 0] - 0.5], order=1)
+    seen = map_coordinates(flat[..., 0], [p_u[:, 1] - 0.5, p_u[:, 0] - 0.5], order=1)
+    np.testing.assert_allclose(seen, original, atol=0.02)
+    assert mask[120, 160]
