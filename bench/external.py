@@ -230,6 +230,9 @@ def main(argv: list[str] | None = None) -> int:
         help="optimiser iterations: rig reconstruct's default, rig demo's, or smoke "
         "(default: smoke for --size smoke, else default)",
     )
+    p.add_argument("--config", type=Path, default=None,
+                   help="a reconstruction config (YAML) merged over the budget, e.g. "
+                   "mesh: {method: patchmatch}")
     a = p.parse_args(argv)
     size = SIZES[a.size]
     if a.ambient:
@@ -241,7 +244,13 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     budget = a.budget or ("smoke" if a.size == "smoke" else "default")
     cache = a.cache or a.out / "cache"
-    results = [run_scene(SCENES[n], size, out, cache, a.data, BUDGETS[budget]) for n in names]
+    config = dict(BUDGETS[budget])
+    if a.config is not None:
+        from reconstruct.pipeline import load_config
+
+        for section, values in load_config(a.config).items():
+            config[section] = {**config.get(section, {}), **values}
+    results = [run_scene(SCENES[n], size, out, cache, a.data, config) for n in names]
     report(
         "external",
         out,
@@ -250,7 +259,8 @@ def main(argv: list[str] | None = None) -> int:
         machine_info(),
         notes=[
             f"{a.size}: {size.width}x{size.height}, {size.views} views, {size.spp} spp, "
-            f"ambient {size.ambient}, optimiser budget {budget}; error maps under {out}/SCENE/"
+            f"ambient {size.ambient}, optimiser budget {budget}, config {a.config}; error maps "
+            f"under {out}/SCENE/"
         ],
     )
     return 0
