@@ -25,7 +25,8 @@ from rig.cli import main
 pytest.importorskip("drivers.sim")
 
 KILLS = 20
-VIEWS = 30  # 120 frames: room for 20 kills even when a start-up kill lets several through
+VIEWS = 30  # 120 frames: room for 20 kills of at most MAX_FRAMES_PER_RUN + 1 frames each
+MAX_FRAMES_PER_RUN = 3
 
 
 def capture_child(args: list[str]) -> None:
@@ -38,6 +39,15 @@ def capture_child(args: list[str]) -> None:
 def lines(session: Path) -> int:
     path = session / "manifest.jsonl"
     return path.read_bytes().count(b"\n") if path.is_file() else 0
+
+
+def wait_at_most(session: Path, frames: int, seconds: float, proc: multiprocessing.Process) -> None:
+    """Sleep `seconds`, or less once the manifest holds `frames` lines: on a fast machine the sim
+    captures dozens of frames in the time window, and the capture must not finish before the
+    last kill."""
+    until = time.monotonic() + seconds
+    while time.monotonic() < until and lines(session) < frames and proc.is_alive():
+        time.sleep(0.002)
 
 
 def test_twenty_sigkills_lose_nothing_and_never_mix_frames(tmp_path: Path) -> None:
@@ -64,9 +74,9 @@ def test_twenty_sigkills_lose_nothing_and_never_mix_frames(tmp_path: Path) -> No
             while lines(out) <= before and proc.is_alive():
                 assert time.monotonic() < deadline, "capture made no progress"
                 time.sleep(0.005)
-            time.sleep(float(rng.uniform(0.0, 0.1)))
+            wait_at_most(out, before + 1 + MAX_FRAMES_PER_RUN, float(rng.uniform(0.0, 0.1)), proc)
         else:  # anywhere in the start-up: opening devices, the resume checks, the first frame
-            time.sleep(float(rng.uniform(0.0, 0.6)))
+            wait_at_most(out, before + MAX_FRAMES_PER_RUN, float(rng.uniform(0.0, 0.6)), proc)
         assert proc.is_alive(), f"capture ended (exit {proc.exitcode}) before kill {kills + 1}"
         os.kill(proc.pid, signal.SIGKILL)
         proc.join()
