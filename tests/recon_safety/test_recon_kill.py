@@ -1,8 +1,8 @@
 """`rig reconstruct` in its own process on a tiny simulated session, SIGKILLed 20 times at
 seeded random instants inside its stages (front, optimisation, export): after every kill the
-status file says `interrupted`, the outputs are either a complete published set or none (never
-a mix), the checkpoint is readable; the run then resumes to the same numbers as an
-uninterrupted run."""
+status file says `interrupted` (or `complete` when the kill landed as a finished run exited),
+the outputs are either a complete published set or none (never a mix), the checkpoint is
+readable; the run then resumes to the same numbers as an uninterrupted run."""
 
 from __future__ import annotations
 
@@ -97,8 +97,11 @@ def test_twenty_sigkills_never_mix_outputs_and_resume_to_the_same_result(
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait()
         status = read_status(recon)
-        assert status is not None and status["status"] == "interrupted", status
+        assert status is not None, "a killed run left no status"
         assert_never_mixed(recon)
+        if status["status"] == "complete":  # the kill landed while the finished run exited
+            continue
+        assert status["status"] == "interrupted", status
         saved = checkpoint_state(recon)
         if saved == "done" and rng.random() < 0.5:  # solve again, so kills land inside it
             (recon / "optimise" / CHECKPOINT).unlink()
