@@ -33,7 +33,9 @@ def test_sigkill_at_random_instants_then_resume(tmp_path: Path, seed: int) -> No
         while manifest_lines(out) < target and proc.poll() is None:
             assert time.monotonic() < deadline, "capture made no progress"
             time.sleep(0.01)
-        time.sleep(float(rng.uniform(0.0, 0.15)))  # anywhere inside the next frame
+        until = time.monotonic() + float(rng.uniform(0.0, 0.15))  # anywhere inside the next frame
+        while time.monotonic() < until and manifest_lines(out) <= target and proc.poll() is None:
+            time.sleep(0.002)
         if proc.poll() is not None:
             assert proc.returncode == 0, proc.stderr.read().decode() if proc.stderr else ""
             break
