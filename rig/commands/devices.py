@@ -108,7 +108,7 @@ def probe_cameras() -> tuple[list[Found], list[str]]:
     except ImportError:
         return [], ["cameras not probed: install `spectral-rig[gphoto2]` for tethered cameras"]
     try:
-        detected = list(gp.Camera.autodetect())
+        detected = list(gp.Camera.autodetect().items())  # (name, port) pairs
     except gp.GPhoto2Error as error:
         return [], [f"camera probe failed: {error}"]
     return [Found("camera", port, name, "gphoto2") for name, port in detected], []
