@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -224,6 +225,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--data", type=Path, default=DATA, help="the shared data folder")
     p.add_argument("--ambient", type=float, default=0.0, help="ambient level vs the bulb")
     p.add_argument(
+        "--no-ambient-frames",
+        action="store_true",
+        help="with --ambient: the room light stays in the lit frames but no ambient frame is "
+        "captured, so nothing is subtracted (what leaving the room light in costs)",
+    )
+    p.add_argument(
         "--budget",
         choices=tuple(BUDGETS),
         default=None,
@@ -234,13 +241,12 @@ def main(argv: list[str] | None = None) -> int:
                    help="a reconstruction config (YAML) merged over the budget, e.g. "
                    "mesh: {method: patchmatch}")
     a = p.parse_args(argv)
-    size = SIZES[a.size]
+    size, folder = SIZES[a.size], a.size  # a session is reused only by the same settings
     if a.ambient:
-        from dataclasses import replace
-
-        size = replace(size, ambient=a.ambient)
+        size = replace(size, ambient=a.ambient, ambient_frames=not a.no_ambient_frames)
+        folder += f"-ambient{a.ambient:g}" + ("-unsubtracted" if a.no_ambient_frames else "")
     names = a.scenes or (SMOKE_SCENES if a.size == "smoke" else tuple(SCENES))
-    out = a.out / a.size
+    out = a.out / folder
     out.mkdir(parents=True, exist_ok=True)
     budget = a.budget or ("smoke" if a.size == "smoke" else "default")
     cache = a.cache or a.out / "cache"
@@ -259,8 +265,8 @@ def main(argv: list[str] | None = None) -> int:
         machine_info(),
         notes=[
             f"{a.size}: {size.width}x{size.height}, {size.views} views, {size.spp} spp, "
-            f"ambient {size.ambient}, optimiser budget {budget}, config {a.config}; error maps "
-            f"under {out}/SCENE/"
+            f"ambient {size.ambient} (frames {size.ambient_frames}), optimiser budget {budget}, "
+            f"config {a.config}; error maps under {out}/SCENE/"
         ],
     )
     return 0

@@ -47,7 +47,8 @@ class Size:
     object_m: float = 0.2
     radius_m: float = 0.5
     spp: int = 16
-    ambient: float = 0.0  # ambient level relative to the bulb (0: no ambient frames)
+    ambient: float = 0.0  # ambient level relative to the bulb (0: no room light)
+    ambient_frames: bool = True  # with a room light: capture an ambient frame per view
 
 
 class ExternalCamera(SimCamera):
@@ -125,7 +126,7 @@ def write_profile(path: Path, spec: SceneSpec, size: Size, scene_dir: Path, stor
         "plan": {
             "views": size.views,
             "illuminations": "all",
-            "ambient": size.ambient > 0,
+            "ambient": size.ambient > 0 and size.ambient_frames,
             "trajectory": {
                 "elevations_deg": list(spec.elevations_deg),
                 "distance_factors": list(spec.distance_factors),
