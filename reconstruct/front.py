@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 import trimesh
+from rich import get_console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from calibration.errors import RigError
@@ -167,7 +168,7 @@ def run_front(
     try:
         with Progress(
             TextColumn("[bold]{task.description}"), BarColumn(), TimeElapsedColumn(),
-            transient=True,
+            transient=True, disable=not get_console().is_terminal,  # no blank line in a log
         ) as progress:
             task = progress.add_task("reconstruct: decode", total=5)
             decode.run(conf.decode, session_dir, dirs["decoded"])

@@ -40,7 +40,6 @@ from typing import Any
 import cv2
 import numpy as np
 import pycolmap
-from rich.progress import track
 
 from calibration.errors import RigError
 from reconstruct.board import (
@@ -56,6 +55,7 @@ from reconstruct.board import (
 from reconstruct.board.poses import rms_of
 from reconstruct.camera import CAMERA_MODELS, Intrinsics, Pose, read_colmap_text, write_colmap_text
 from reconstruct.decode import INDEX, SFM_DIR, DecodeIndex, load_frame
+from reconstruct.progress import track
 from reconstruct.session import Session, write_bytes_atomically
 from reconstruct.stages import quiet_colmap, run_stage
 
@@ -391,7 +391,7 @@ def _board(
     images = board_images(decoded, decoded_dir)
     detections = {
         v: detect_board(img, spec)
-        for v, img in track(images.items(), description="finding the board", transient=True)
+        for v, img in track(list(images.items()), "finding the board")
     }
     size = _full_size(decoded, min(images))
     given = session_intrinsics(session.info)

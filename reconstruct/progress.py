@@ -59,8 +59,13 @@ def new_progress(console: Console | None = None, transient: bool = False) -> Pro
 
 def track(items: Sequence[T], description: str) -> Iterator[T]:
     """Iterate with a transient bar on stderr: for loops over views that take seconds each
-    (plane-sweep stereo, visibility ray casting), gone from the terminal once done."""
-    with new_progress(Console(stderr=True), transient=True) as bar:
+    (plane-sweep stereo, visibility ray casting), gone from the terminal once done. Not on a
+    log file or pipe, where a transient bar would only leave a blank line."""
+    console = Console(stderr=True)
+    if not console.is_terminal:
+        yield from items
+        return
+    with new_progress(console, transient=True) as bar:
         task = bar.add_task(description, total=len(items), note="")
         for item in items:
             yield item
