@@ -81,9 +81,10 @@ def prepare_resume(session_dir: Path, frames: list[FrameSpec], warn: Warn) -> li
     frames (quarantining mismatches), re-adopt or quarantine orphans; return the complete
     frames. Raises RigError when a recorded frame's file is missing (it is not captured
     again silently: the person may still have it)."""
+    _check_folders(session_dir)
     _truncate_torn_line(session_dir / MANIFEST_FILE)
     n_views = 1 + max((s.view for s in frames), default=-1)
-    records = read_manifest(session_dir, n_views)
+    records = _drop_quarantined(session_dir, read_manifest(session_dir, n_views))
     _check_against_plan(session_dir, records, frames)
     missing = [r for r in records if not all((session_dir / p).is_file() for p in record_paths(r))]
     if missing:
@@ -107,6 +108,47 @@ def prepare_resume(session_dir: Path, frames: list[FrameSpec], warn: Warn) -> li
         if f.is_file() and f"{RAW_DIR}/{f.name}" not in owned
     ]
     return records + _adopt(session_dir, orphans, done, records, warn)
+
+
+def _check_folders(session_dir: Path) -> None:
+    """Resume lists and moves files in these folders: a link out of the session (a foreign
+    session's ``raw -> ~/Documents``) would have it move the person's own files."""
+    root = session_dir.resolve()
+    for name in (RAW_DIR, f"{RAW_DIR}/{INCOMING}", QUARANTINE_DIR, MANIFEST_FILE):
+        path = session_dir / name
+        if path.is_symlink() or (path.exists() and not path.resolve().is_relative_to(root)):
+            raise RigError(
+                f"{path} is a link{' out of the session' if path.exists() else ''}: resume "
+                "moves files there and will not follow it",
+                f"replace it with a real {'file' if name == MANIFEST_FILE else 'folder'} "
+                "inside the session",
+            )
+
+
+def _drop_quarantined(session_dir: Path, records: list[FrameRecord]) -> list[FrameRecord]:
+    """Drop the lines of frames whose files a re-hash already moved to quarantine/ when a kill
+    stopped it before it rewrote the manifest (they are captured again, not reported missing)."""
+    reasons = session_dir / QUARANTINE_DIR / REASONS_FILE
+    if not reasons.is_file():
+        return records
+    moved = set()
+    for line in reasons.read_text(encoding="utf-8", errors="replace").splitlines():
+        try:
+            entry = json.loads(line)
+        except ValueError:
+            continue  # a line torn by a kill
+        if isinstance(entry, dict) and "sha256" in str(entry.get("reason")):
+            moved.add(str(entry.get("was")))
+    gone = [
+        r for r in records
+        if any(p in moved and not (session_dir / p).is_file() for p in record_paths(r))
+    ]
+    if not gone:
+        return records
+    keep = [r for r in records if r not in gone]
+    manifest = session_dir / MANIFEST_FILE
+    write_bytes_atomically(manifest, "".join(r.to_json() + "\n" for r in keep).encode())
+    return keep
 
 
 def _check_against_plan(
@@ -147,7 +189,12 @@ def _rehash(session_dir: Path, records: list[FrameRecord], warn: Warn) -> list[F
     manifest = session_dir / MANIFEST_FILE
     (session_dir / QUARANTINE_DIR).mkdir(exist_ok=True)
     stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y%m%dT%H%M%S")
-    shutil.copy2(manifest, session_dir / QUARANTINE_DIR / f"manifest-{stamp}.jsonl")
+    backup = session_dir / QUARANTINE_DIR / f"manifest-{stamp}.jsonl"
+    n = 1
+    while backup.exists():  # two resumes within a second keep both backups
+        backup = backup.with_name(f"manifest-{stamp}.{n}.jsonl")
+        n += 1
+    shutil.copy2(manifest, backup)
     for record in bad:
         for path in record_paths(record):
             file = session_dir / path

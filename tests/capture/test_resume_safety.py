@@ -15,7 +15,7 @@ from simrig import PROFILE as SIM_PROFILE
 from calibration.errors import RigError
 from reconstruct.session import MANIFEST_FILE, read_manifest, sha256_file, verify_frames
 from rig.capture import run_capture
-from rig.capture.resume import QUARANTINE_DIR, REASONS_FILE
+from rig.capture.resume import QUARANTINE_DIR, REASONS_FILE, quarantine
 from rig.cli import main
 
 QUIET = Console(quiet=True)
@@ -166,3 +166,34 @@ def test_a_missing_recorded_frame_stops_the_resume(tmp_path: Path) -> None:
     (out / json.loads(lines[0])["path"]).unlink()
     with pytest.raises(RigError, match="missing from raw/"):
         capture(out, resume=True)
+
+
+def test_a_re_hash_killed_before_its_manifest_rewrite_resumes(tmp_path: Path) -> None:
+    """The bad frame's file was moved to quarantine/ and logged, the manifest not yet
+    rewritten: the next resume drops that line and captures the frame again."""
+    out = tmp_path / "s"
+    lines = stopped_at(out, 9)
+    victim = json.loads(lines[2])
+    np.save(out / victim["path"], np.zeros((16, 16), np.uint16))
+    quarantine(out, out / victim["path"], "its sha256 differs from the manifest", lambda _: None)
+    assert (out / MANIFEST_FILE).read_bytes() == b"".join(lines)  # the kill came here
+    capture(out, resume=True)
+    assert_complete(out)
+
+
+@pytest.mark.parametrize("folder", ["raw", "raw/.incoming", "quarantine"])
+def test_a_session_folder_linked_elsewhere_is_refused_and_nothing_moves(
+    tmp_path: Path, folder: str
+) -> None:
+    out = tmp_path / "s"
+    stopped_at(out, 5)
+    (out / "raw" / "stray.txt").write_bytes(b"someone's file")
+    elsewhere = tmp_path / "documents"
+    (out / folder).mkdir(parents=True, exist_ok=True)
+    (out / folder).rename(elsewhere)
+    (out / folder).symlink_to(elsewhere, target_is_directory=True)
+    before = {p.relative_to(tmp_path): p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    with pytest.raises(RigError, match=f"{folder} is a link out of the session"):
+        capture(out, resume=True)
+    after = {p.relative_to(tmp_path): p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    assert after == before
