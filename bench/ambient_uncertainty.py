@@ -65,6 +65,7 @@ def calibration(err: np.ndarray, std: np.ndarray) -> dict[str, Any]:
         "empirical": [float(np.mean(z <= norm.ppf(0.5 + q / 2))) for q in levels],
         "inside_2sigma_per_band": float(np.mean(z <= 2.0)),
         "inside_2sigma_all_bands": float(np.mean(np.all(z <= 2.0, axis=1))),
+        "inside_2sigma_by_wavelength": np.mean(z <= 2.0, axis=0).round(4).tolist(),
         "median_z": float(np.median(z)),
         "rms_z": float(np.sqrt(np.mean(z**2))),
     }
