@@ -33,10 +33,10 @@ N(μ, Σ) as the prior on α:
 Neighbour coupling: with the regularisers out of the prior, vertices couple only through the
 normals, the geometric term and the light; solving the whole linearised system for d and for the
 light's marginal covariance (tried on the bench) changed coverage by < 0.5 %, so the per-vertex
-blocks are kept. What this neglects (docs/usage-reconstruct.md): a solve stuck in a wrong local
-minimum (the bench's perturbed start: positions and light off far beyond their local std, which
-scales all reflectances of a region), calibration errors (camera sensitivity, SPDs) and model
-errors beyond what the residuals show.
+blocks are kept. What this neglects (docs/usage-reconstruct.md): a solve that settles where its
+linearisation cannot tell it is wrong (the bench's perturbed start: shape and light off far
+beyond their local std, which scales the reflectance of whole regions), calibration errors
+(camera sensitivity, SPDs) and model errors beyond what the residuals show.
 """
 
 from __future__ import annotations
