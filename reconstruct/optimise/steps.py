@@ -82,9 +82,10 @@ class OptimiseSettings:
     # bilinear taps straddle the silhouette and mix in the background.
     min_view_cos: float = 0.3
     shadow_eps: float = 1e-4
-    # Per-vertex reflectance std (optimise/uncertainty.py): "training" puts the spread of real
-    # reflectances on what the camera does not see (calibrated on the sim); "regularisers"
-    # reads the smoothness terms as the prior (plain Gauss–Newton: over-confident).
+    # Per-vertex reflectance std (optimise/uncertainty.py): "training" is the expected error
+    # of the estimate under the data and the training reflectances as the prior (their spread
+    # on what the camera does not see, and how far the regularisers pulled the estimate);
+    # "regularisers" reads the smoothness terms as the prior (plain Gauss–Newton: over-confident).
     uncertainty_prior: str = "training"
     solver: SolverSettings = field(default_factory=SolverSettings)
 

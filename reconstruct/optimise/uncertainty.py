@@ -4,26 +4,39 @@ Each vertex's block of JᵀJ + priors (the exact per-vertex blocks the solver's 
 forms: rendering term, spectral smoothness, the vertex's share of the photometric smoothness and,
 through the normals, of the geometric term) is taken over [t, α]: t the motion along the vertex
 normal (the solver's ``position_motion: normal``; positions the solve kept fixed have no t) and
-α the basis weights. Its inverse, scaled by the noise, is the vertex's covariance:
+α the basis weights.
 
 * noise: the rendering residuals give one image-noise variance per channel (χ² scale)
   ``s² = Σ_o (k w_f e_o)² / (3M − n_params)`` (k the rendering unit, w_f the frame's noise
-  weight); the cost weighs vertex i's observations by ``1/|V(i)|``, so its block is scaled back
-  with ``s² / |V(i)|`` — the priors are read at the same per-vertex scale as in the cost;
-* ``Σ_α`` maps to a per-wavelength std ``sqrt(diag(B Σ_α Bᵀ))``; the position std is ``sqrt(Σ_tt)``.
+  weight); the cost weighs vertex i's observations by ``1/|V(i)|``, so its block is read in
+  noise units as ``block / (s² / |V(i)|)`` — the priors at the same per-vertex scale as in the
+  cost;
+* α maps to a per-wavelength std ``sqrt(diag(B C Bᵀ))``; the position std is ``sqrt(C_tt)``.
 
 Read as a prior, the smoothness regularisers claim far too much: 2 illuminations × 3 channels
 see fewer directions than the N_b basis weights, the regularisers fill the rest, and their error
 there (the metamer bias) dominates the actual error, while the plain covariance is smallest where
-that bias is. So by default (``optimise.uncertainty_prior: training``) the reflectance covariance
-is the data blocks (regularisers out) plus a Gaussian prior with the covariance of the basis
-weights of the training reflectances: directions the camera sees get the noise, directions it
-does not see keep the spread of real surfaces. The plain one stays as ``reflectance_std_gn``.
+that bias is. So by default (``optimise.uncertainty_prior: training``, a
+:class:`ReflectancePrior`) the std is about the *reported* estimate θ̂ under a Gaussian posterior
+made of the data blocks (regularisers out) and the training reflectances' basis weights
+N(μ, Σ) as the prior on α:
 
-What this neglects (docs/usage-reconstruct.md): the coupling between vertices (neighbours held
-at their estimates: a conditional, not marginal, covariance, so smoothing-dominated vertices look
-surer than they are), the light's and the poses' uncertainty, calibration errors (camera
-sensitivity, SPDs), the basis truncation and model errors beyond what the residuals show.
+* posterior covariance ``Σ_post = (D + Σ⁻¹)⁻¹`` (D the data precision over [t, α]; t keeps the
+  geometric term as its prior);
+* the estimate is not the posterior mean: the regularisers pulled it. Linearised at θ̂,
+  ``θ̂ − m_post = Σ_post (g + Σ⁻¹(α̂ − μ))`` with g the data gradient (t: the whole gradient,
+  its prior included), and the expected squared error of θ̂ is ``Σ_post + d dᵀ``. d is
+  vertex-specific: large where the regularisers decided against what data and real surfaces say;
+* the basis cannot represent a real reflectance exactly: the training set's mean squared
+  residual outside the basis span is added per wavelength.
+
+Neighbour coupling: with the regularisers out of the prior, vertices couple only through the
+normals, the geometric term and the light; solving the whole linearised system for d and for the
+light's marginal covariance (tried on the bench) changed coverage by < 0.5 %, so the per-vertex
+blocks are kept. What this neglects (docs/usage-reconstruct.md): a solve that settles where its
+linearisation cannot tell it is wrong (the bench's perturbed start: shape and light off far
+beyond their local std, which scales the reflectance of whole regions), calibration errors
+(camera sensitivity, SPDs) and model errors beyond what the residuals show.
 """
 
 from __future__ import annotations
@@ -38,10 +51,19 @@ from reconstruct.optimise.cost import JointCost
 
 
 @dataclass
+class ReflectancePrior:
+    """What real surfaces look like in the basis: the training reflectances' weights."""
+
+    mean: np.ndarray  # (N_b,) μ
+    cov: np.ndarray  # (N_b, N_b) Σ
+    truncation_var: np.ndarray  # (N_λ,) mean squared residual outside the basis span
+
+
+@dataclass
 class VertexUncertainty:
     reflectance_std: np.ndarray  # (N, N_λ); NaN for unobserved vertices
     position_std_m: np.ndarray  # (N,) along the normal; NaN where the position was not solved
-    alpha_cov: np.ndarray  # (N, N_b, N_b); NaN for unobserved vertices
+    alpha_cov: np.ndarray  # (N, N_b, N_b) expected squared error of α̂; NaN for unobserved
     noise_std: float  # per-channel image noise from the residuals, linear image units
     dof: int
     reflectance_std_gn: np.ndarray | None = None  # plain Gauss–Newton std (regularisers as prior)
@@ -73,12 +95,12 @@ def vertex_uncertainty(
     cost: JointCost,
     theta: np.ndarray,
     free_positions: np.ndarray,
-    prior_cov: np.ndarray | None = None,
+    prior: ReflectancePrior | None = None,
 ) -> VertexUncertainty:
-    """Block-diagonal Gauss–Newton covariance at θ (module docstring); ``free_positions``
-    (N,) bool: vertices whose position the last solve moved. With ``prior_cov`` (N_b, N_b) the
-    reflectance std comes from the data blocks plus that prior on α instead of the smoothness
-    regularisers (see the module docstring); ``reflectance_std_gn`` keeps the plain one."""
+    """Per-vertex std at θ (module docstring); ``free_positions`` (N,) bool: vertices whose
+    position the last solve moved. With ``prior`` the std is the expected error of the estimate
+    under the data and that prior (regularisers out); without it, and always as
+    ``reflectance_std_gn``, the plain Gauss–Newton std with the regularisers as the prior."""
     p, o = cost.p, cost.p.obs
     n, nb = p.n_vertices, p.n_basis
     lin = cost.linearise(theta, positions=True)
@@ -108,34 +130,67 @@ def vertex_uncertainty(
     cov[idx] = np.linalg.pinv(H[idx], hermitian=True) * scale
     B = cost.B
     gn_std = _spectral_std(B, cov[:, 1:, 1:])
-    pos = np.sqrt(np.maximum(cov[:, 0, 0], 0.0))
-    pos[fixed] = np.nan
-    if prior_cov is not None:
-        # data part only (regularisers out), in noise units, plus the reflectance prior
+    if prior is not None:
+        gx, ga, _ = p.unpack(lin.gradient())
+        reg_grad = cost.gamma[0] * A @ cost.SS + (cost.laplacian @ A) @ cost.BB
+        grad = np.zeros((n, 1 + nb))
+        grad[:, 0] = np.where(fixed, 0.0, np.einsum("ij,ij->i", gx, normals))
+        grad[:, 1:] = ga - reg_grad
         data = H[idx].copy()
         data[:, 1:, 1:] -= cost.gamma[0] * cost.SS + cost.lap_diag[idx, None, None] * cost.BB
-        precision = data / scale
-        precision[:, 1:, 1:] += np.linalg.inv(prior_cov)
-        cov[idx] = np.linalg.pinv(precision, hermitian=True)
-    alpha_cov = cov[:, 1:, 1:]
+        cov[idx] = expected_error(data / scale, grad[idx] / scale[:, :, 0], A[idx], prior)
+    var = _spectral_var(B, cov[:, 1:, 1:])
+    if prior is not None:
+        var += prior.truncation_var
+    pos = np.sqrt(np.maximum(cov[:, 0, 0], 0.0))
+    pos[fixed] = np.nan
     return VertexUncertainty(
-        reflectance_std=_spectral_std(B, alpha_cov),
+        reflectance_std=np.sqrt(np.maximum(var, 0.0)),
         position_std_m=pos,
-        alpha_cov=alpha_cov,
+        alpha_cov=cov[:, 1:, 1:],
         noise_std=float(np.sqrt(s2) / p.weights.rendering_scale),
         dof=dof,
         reflectance_std_gn=gn_std,
     )
 
 
+def expected_error(
+    data: np.ndarray, grad: np.ndarray, alpha: np.ndarray, prior: ReflectancePrior
+) -> np.ndarray:
+    """``E[(θ̂ − θ)(θ̂ − θ)ᵀ] = Σ_post + d dᵀ`` per vertex (K, 1 + N_b, 1 + N_b) over [t, α],
+    from the data precision ``data`` (K, 1 + N_b, 1 + N_b) and data gradient ``grad``
+    (K, 1 + N_b) at the estimate (noise units; ½∇ of χ²) and the prior N(μ, Σ) on α:
+    ``Σ_post = (D + Σ⁻¹)⁻¹``, ``d = θ̂ − m_post = Σ_post (g + Σ⁻¹(α̂ − μ))``."""
+    inv_prior = np.linalg.inv(prior.cov)
+    precision = data.copy()
+    precision[:, 1:, 1:] += inv_prior
+    post = np.linalg.pinv(precision, hermitian=True)
+    g = grad.copy()
+    g[:, 1:] += (alpha - prior.mean) @ inv_prior
+    d = np.einsum("kij,kj->ki", post, g)
+    return post + d[:, :, None] * d[:, None, :]
+
+
+def _spectral_var(B: np.ndarray, alpha_cov: np.ndarray) -> np.ndarray:
+    """``diag(B C Bᵀ)`` per vertex (N, N_λ)."""
+    return np.einsum("lb,nbc,lc->nl", B, alpha_cov, B)
+
+
 def _spectral_std(B: np.ndarray, alpha_cov: np.ndarray) -> np.ndarray:
-    """``sqrt(diag(B Σ_α Bᵀ))`` per vertex (N, N_λ)."""
-    var = np.einsum("lb,nbc,lc->nl", B, alpha_cov, B)
-    return np.sqrt(np.maximum(var, 0.0))
+    """``sqrt(diag(B C Bᵀ))`` per vertex (N, N_λ)."""
+    return np.sqrt(np.maximum(_spectral_var(B, alpha_cov), 0.0))
 
 
-def reflectance_prior(basis: SpectralBasis) -> np.ndarray:
-    """Covariance (N_b, N_b) of the basis weights of real surfaces (the training
-    reflectances the basis is built from): how far a reflectance may lie off in directions
-    the camera under the bulb's illuminations does not see."""
-    return np.cov(basis.project(training_reflectances(basis.grid)), rowvar=False)
+def reflectance_prior(basis: SpectralBasis) -> ReflectancePrior:
+    """Mean and covariance of the basis weights of real surfaces (the training reflectances
+    the basis is built from) — how far a reflectance may lie in directions the camera under the
+    bulb's illuminations does not see — and their mean squared residual outside the basis span
+    (what no weights can represent)."""
+    refl = training_reflectances(basis.grid)
+    weights = basis.project(refl)
+    residual = refl - basis.reconstruct(weights)
+    return ReflectancePrior(
+        mean=np.mean(weights, axis=0),
+        cov=np.cov(weights, rowvar=False),
+        truncation_var=np.mean(residual**2, axis=0),
+    )

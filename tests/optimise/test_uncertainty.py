@@ -8,11 +8,19 @@ import numpy as np
 import pytest
 from scipy.stats import spearmanr
 
+from calibration.basis import default_basis, pca_basis
+from calibration.defaults import training_reflectances
 from reconstruct import export
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.steps import OptimiseSettings, build_problem, optimise
 from reconstruct.optimise.synthetic import SyntheticScene, make_scene
-from reconstruct.optimise.uncertainty import VertexUncertainty, vertex_uncertainty
+from reconstruct.optimise.uncertainty import (
+    ReflectancePrior,
+    VertexUncertainty,
+    expected_error,
+    reflectance_prior,
+    vertex_uncertainty,
+)
 from reconstruct.pipeline import export_result
 
 
@@ -81,3 +89,71 @@ def test_optimise_reports_and_export_writes_the_uncertainty(tmp_path, noisy):
     assert summary["vertices_with_uncertainty"] == int(result.observed.sum())
     assert summary["reflectance_std_median"] > 0
     assert tmp_path / "uncertainty.png" in figures
+
+
+def test_expected_error_is_the_posterior_spread_plus_the_estimates_offset_from_its_mean():
+    # a linear Gaussian model per vertex: 6 measurements (2 illuminations × 3 channels) of
+    # [t, α] (N_b = 8), so two α directions are seen by the prior only
+    rng = np.random.default_rng(3)
+    nb, k = 8, 5
+    prior = ReflectancePrior(
+        mean=rng.normal(size=nb),
+        cov=np.cov(rng.normal(size=(50, nb)), rowvar=False),
+        truncation_var=np.zeros(31),
+    )
+    J = rng.normal(size=(k, 6, 1 + nb))
+    y = rng.normal(size=(k, 6))
+    est = rng.normal(size=(k, 1 + nb))  # any estimate, e.g. one the regularisers pulled
+    grad = np.einsum("kri,kr->ki", J, np.einsum("kri,ki->kr", J, est) - y)
+    got = expected_error(J.transpose(0, 2, 1) @ J, grad, est[:, 1:], prior)
+    # brute force: the posterior of y = J θ + N(0, 1) with N(μ, Σ) on α, by least squares on
+    # the whitened stack [J; L⁻¹ [0 I]] (Σ = L Lᵀ); t has no prior
+    L = np.linalg.cholesky(prior.cov)
+    W = np.hstack([np.zeros((nb, 1)), np.linalg.inv(L)])
+    for i in range(k):
+        A = np.vstack([J[i], W])
+        b = np.concatenate([y[i], np.linalg.solve(L, prior.mean)])
+        mean = np.linalg.lstsq(A, b, rcond=None)[0]
+        cov = np.linalg.inv(A.T @ A)
+        off = est[i] - mean
+        np.testing.assert_allclose(got[i], cov + np.outer(off, off), rtol=1e-8, atol=1e-10)
+    # at the posterior mean there is no offset: only the posterior spread is left
+    mean0 = np.linalg.lstsq(
+        np.vstack([J[0], W]), np.concatenate([y[0], np.linalg.solve(L, prior.mean)]), rcond=None
+    )[0]
+    g0 = J[0].T @ (J[0] @ mean0 - y[0])
+    at_mean = expected_error((J[0].T @ J[0])[None], g0[None], mean0[None, 1:], prior)[0]
+    np.testing.assert_allclose(
+        at_mean, np.linalg.inv(np.vstack([J[0], W]).T @ np.vstack([J[0], W])), rtol=1e-8
+    )
+
+
+def test_reflectance_prior_is_the_training_weights_and_what_the_basis_misses():
+    basis = default_basis()
+    prior = reflectance_prior(basis)
+    weights = basis.project(training_reflectances(basis.grid))
+    np.testing.assert_allclose(prior.mean, weights.mean(axis=0))
+    np.testing.assert_allclose(prior.cov, np.cov(weights, rowvar=False))
+    # 8 components leave about 0.01 RMS per band outside the span; all 31 leave nothing
+    assert 0.003 < float(np.sqrt(np.mean(prior.truncation_var))) < 0.03
+    full = pca_basis(training_reflectances(basis.grid), 31)
+    assert np.max(reflectance_prior(full).truncation_var) < 1e-20
+
+
+def test_reflectance_std_covers_the_actual_error_and_ranks_it():
+    # the regularisers decide what 2 illuminations cannot see: the std must hold that error
+    # (~95 % of the truths inside ±2σ) and be largest where it is (the plain Gauss–Newton std
+    # does neither: it is smallest where the regularisers decide most)
+    scene = make_scene(3, 12, noise=0.003, seed=0)
+    cfg = OptimiseSettings(outer_iterations=1, joint_iterations=5, light_iterations=5)
+    result = optimise(scene.input(), cfg)
+    unc = result.uncertainty
+    assert unc is not None and unc.reflectance_std_gn is not None
+    seen = result.observed
+    err = result.reflectance[seen] - scene.reflectance[seen]
+    rms = np.sqrt(np.mean(err**2, axis=1))
+    std = unc.reflectance_std[seen]
+    assert 0.85 <= np.mean(np.abs(err) <= 2 * std) <= 0.99
+    assert spearmanr(std.mean(axis=1), rms).statistic >= 0.5
+    gn = unc.reflectance_std_gn[seen]
+    assert spearmanr(gn.mean(axis=1), rms).statistic < 0.2
