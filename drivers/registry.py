@@ -68,15 +68,22 @@ def _transport_section(options: dict[str, Any]) -> dict[str, Any]:
     return spec
 
 
-def _transport(driver: str, options: dict[str, Any]) -> Transport:
-    """The profile's transport over the driver's default; the defaults (a baud rate, a VID)
-    apply only to the default's own type, so e.g. a ``subprocess`` bridge can replace the
-    serial port of any light."""
-    given = _transport_section(options)
+def resolved_transport(driver: str, section: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The transport a device section opens: the profile's ``transport:`` over the driver's
+    default; the defaults (a baud rate, a VID) apply only to the default's own type, so e.g. a
+    ``subprocess`` bridge can replace the serial port of any light. Also what the resume
+    trust check reads, so the two cannot disagree on what would run."""
+    given = _transport_section({"transport": dict(section or {})})
     default = DEFAULT_TRANSPORTS.get(driver, {})
     if given.get("type", default.get("type")) != default.get("type"):
         default = {}
-    spec = {**default, **given}
+    return {**default, **given}
+
+
+def _transport(driver: str, options: dict[str, Any]) -> Transport:
+    """Open the section's transport (:func:`resolved_transport`), taking it out of
+    ``options``."""
+    spec = resolved_transport(driver, options.pop("transport", None))
     if "type" not in spec:
         raise RigError(f"driver {driver} needs a `transport:` section", "see docs/usage-drivers.md")
     return open_transport(spec, where=f"{driver}.transport")

@@ -10,6 +10,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from calibration.errors import RigError
+from drivers.registry import resolved_transport
 from reconstruct.session import SESSION_FILE
 from rig.capture.devices import Ask
 from rig.profile import Profile
@@ -23,10 +24,11 @@ def session_programs(profile: Profile) -> list[str]:
     found = []
     for kind in ("camera", "light", "projector", "spectrometer"):
         spec = profile.device(kind) or {}
-        transport = spec.get("transport")
-        if not isinstance(transport, Mapping):
-            continue
-        if transport.get("type", transport.get("kind")) == "subprocess":
+        given = spec.get("transport")
+        if given is not None and not isinstance(given, Mapping):
+            continue  # opening it fails with its own message before anything runs
+        transport = resolved_transport(str(spec.get("driver")), given)
+        if transport.get("type") == "subprocess":
             command = transport.get("command")
             shown = " ".join(map(str, command)) if isinstance(command, list) else str(command)
             found.append(f"devices.{kind} runs `{shown}`")

@@ -14,7 +14,7 @@ import yaml
 
 from calibration.errors import RigError
 from calibration.store import CalibrationStore
-from rig.capture.trust import confirm_session_devices
+from rig.capture.trust import confirm_session_devices, session_programs
 from rig.cli import main
 from rig.profile import parse_profile
 
@@ -175,3 +175,27 @@ def test_the_person_is_asked_before_a_snapshot_program_runs(answer: str, ok: boo
     with pytest.raises(RigError, match="--trust-session-devices"):  # no TTY: never asks
         confirm_session_devices(Path("s"), profile, trusted=False, ask=ask, interactive=False)
     confirm_session_devices(Path("s"), profile, trusted=True, ask=None, interactive=False)
+
+
+@pytest.mark.parametrize(
+    "transport",
+    [
+        {"type": "serial", "kind": "subprocess", "command": ["ola"]},  # `kind` wins when opened
+        {"kind": "subprocess", "command": ["ola"]},
+    ],
+)
+def test_the_trust_check_reads_the_transport_as_the_registry_opens_it(transport: dict) -> None:
+    profile = parse_profile(
+        {
+            "name": "p",
+            "devices": {
+                "camera": {"driver": "sim"},
+                "light": {"driver": "dmx", "transport": transport},
+            },
+            "illuminations": {"A": {"r": 1.0}},
+            "plan": {"views": 2, "illuminations": "all"},
+            "light_mount": {"type": "plate", "offset_m": [0.1, 0.0, 0.0]},
+        },
+        "p.yaml",
+    )
+    assert session_programs(profile) == ["devices.light runs `ola`"]
