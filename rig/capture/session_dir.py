@@ -117,6 +117,15 @@ def discard_unstarted_session(out_dir: Path) -> None:
             + ")",
             "give the folder `rig capture --out` created, or start a new session with --out",
         )
+    raw = out_dir / RAW_DIR
+    files = sorted(p for p in raw.rglob("*") if p.is_file()) if raw.is_dir() else []
+    if files:  # session.yaml removed after frames were taken: never delete them
+        raise RigError(
+            f"{out_dir} has no {SESSION_FILE} but holds {len(files)} file(s) under {RAW_DIR}/ "
+            f"(first: {files[0].relative_to(out_dir)}); nothing was deleted",
+            f"restore {SESSION_FILE} from a backup and resume, or move the frames elsewhere "
+            "and start a new session",
+        )
     for path in out_dir.iterdir():
         shutil.rmtree(path) if path.is_dir() else path.unlink()
 

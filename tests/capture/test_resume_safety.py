@@ -197,3 +197,26 @@ def test_a_session_folder_linked_elsewhere_is_refused_and_nothing_moves(
         capture(out, resume=True)
     after = {p.relative_to(tmp_path): p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
     assert after == before
+
+
+def test_resume_with_a_profile_never_deletes_frames_of_a_session_without_session_yaml(
+    tmp_path: Path,
+) -> None:
+    out = tmp_path / "s"
+    stopped_at(out, 5)
+    (out / "session.yaml").unlink()
+    (out / MANIFEST_FILE).write_bytes(b"")  # manifest lost too
+    before = hashes(out / "raw")
+    with pytest.raises(RigError, match="nothing was deleted"):
+        capture(out, resume=True)
+    assert hashes(out / "raw") == before
+
+
+def test_resume_with_a_profile_starts_afresh_after_a_kill_before_session_yaml(
+    tmp_path: Path,
+) -> None:
+    out = tmp_path / "s"
+    (out / "raw" / ".incoming").mkdir(parents=True)
+    (out / MANIFEST_FILE).write_bytes(b"")
+    capture(out, resume=True)
+    assert_complete(out)
