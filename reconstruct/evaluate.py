@@ -16,13 +16,13 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from calibration.errors import RigError
-from reconstruct import export, plots
+from reconstruct import export, plots, publish
 from reconstruct.camera import Intrinsics, Pose
 from reconstruct.raycast import RayCaster
 from reconstruct.relight import encode_srgb
 from reconstruct.render import render_image
 
-EVALUATION_FILE = "evaluation.json"
+EVALUATION_FILE, RMSE_FILE, ERROR_MAP, ERROR_HIST = publish.EVALUATION
 
 
 @dataclass
@@ -193,12 +193,12 @@ def evaluate(
     out = Path(out_dir) if out_dir else (recon if recon.is_dir() else recon.parent)
     vmax = float(np.percentile(rmse[observed], 95)) if observed.any() else float(rmse.max())
     files = [
-        error_map(out / "spectral_error_map.png", X, faces, np.where(observed, rmse, np.nan), vmax),
+        error_map(out / ERROR_MAP, X, faces, np.where(observed, rmse, np.nan), vmax),
         plots.error_histogram(
-            out / "spectral_error_hist.png", rmse[observed], "spectral RMSE per vertex"
+            out / ERROR_HIST, rmse[observed], "spectral RMSE per vertex"
         ),
     ]
     ev.files = [str(f) for f in files]
-    np.save(out / "spectral_rmse_per_vertex.npy", rmse)
+    np.save(out / RMSE_FILE, rmse)
     export.write_report(out / EVALUATION_FILE, asdict(ev))
     return ev

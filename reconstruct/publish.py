@@ -20,6 +20,14 @@ OLD = ".export-old"
 MARKER = "outputs.json"
 # Outputs written before the marker existed (an older version's recon folder).
 LEGACY = ("mesh.ply", "reflectance.npz", "report.json", "*.png")
+# `rig evaluate`'s files in recon/: they describe the set they were computed on, so a new
+# set replaces them too (run `rig evaluate` again); nothing else of the person's is touched.
+EVALUATION = (
+    "evaluation.json",
+    "spectral_rmse_per_vertex.npy",
+    "spectral_error_map.png",
+    "spectral_error_hist.png",
+)
 
 
 def staging_dir(recon_dir: Path) -> Path:
@@ -41,8 +49,11 @@ def published(recon_dir: Path) -> list[str] | None:
 
 
 def _current(recon_dir: Path) -> set[str]:
-    names = set(published(recon_dir) or [])
-    for pattern in LEGACY:
+    """The files the new set replaces: the marker's list (or, without a marker, the legacy
+    patterns) and the evaluation of that set."""
+    listed = published(recon_dir)
+    names = set(listed or [])
+    for pattern in (*(LEGACY if listed is None else ()), *EVALUATION):
         names.update(p.name for p in recon_dir.glob(pattern) if p.is_file())
     return names
 
@@ -50,11 +61,12 @@ def _current(recon_dir: Path) -> set[str]:
 def publish(recon_dir: Path, staging: Path) -> list[Path]:
     """Swap the staged files in for the previous outputs; returns their final paths."""
     new = sorted(p.name for p in staging.iterdir() if p.is_file())
+    replaced = _current(recon_dir) - {MARKER}  # read while the marker still lists the old set
     (recon_dir / MARKER).unlink(missing_ok=True)
     fsync_dir(recon_dir)
     old_dir = recon_dir / OLD
     old_dir.mkdir(exist_ok=True)
-    for name in _current(recon_dir) - {MARKER}:
+    for name in replaced:
         if (recon_dir / name).is_file():
             (recon_dir / name).replace(old_dir / name)
     fsync_dir(recon_dir)

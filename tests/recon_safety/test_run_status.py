@@ -82,6 +82,15 @@ def test_publish_swaps_the_whole_set(tmp_path: Path) -> None:
     assert (tmp_path / "mesh.ply").read_text() == "new"
 
 
+def test_publish_keeps_the_persons_files_and_drops_a_stale_evaluation(tmp_path: Path) -> None:
+    publish.publish(tmp_path, stage(tmp_path, {"mesh.ply": "old"}))
+    for name in (*publish.EVALUATION, "notes.png"):  # rig evaluate's files, and the person's
+        (tmp_path / name).write_text("of the old set")
+    publish.publish(tmp_path, stage(tmp_path, {"mesh.ply": "new"}))
+    assert (tmp_path / "notes.png").read_text() == "of the old set"
+    assert not any((tmp_path / name).exists() for name in publish.EVALUATION)
+
+
 def test_a_crash_mid_swap_leaves_no_mix_and_no_marker(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
