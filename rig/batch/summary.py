@@ -23,6 +23,7 @@ FIGURES = (
     "spectral_rmse",
     "accuracy_mm",
     "recon_seconds",
+    "skipped_frames",
 )
 COLUMNS = ("session", "status", "seconds", *FIGURES, "error")
 # The table's columns (the CSV has them all) and their short headers.
@@ -35,6 +36,7 @@ TABLE = (
     "cost_total",
     "spectral_rmse",
     "accuracy_mm",
+    "skipped_frames",
 )
 HEADERS = {
     "seconds": "time s",
@@ -42,8 +44,9 @@ HEADERS = {
     "cost_total": "cost",
     "spectral_rmse": "spectral RMSE",
     "accuracy_mm": "accuracy mm",
+    "skipped_frames": "frames left out",
 }
-STYLE = {"done": "green", "skipped": "cyan", "failed": "bold red"}
+STYLE = {"done": "green", "incomplete": "yellow", "skipped": "cyan", "failed": "bold red"}
 
 
 def _cell(value: Any) -> str:

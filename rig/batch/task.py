@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from calibration.errors import RigError
-from reconstruct import export
+from reconstruct import export, publish
 from reconstruct.evaluate import EVALUATION_FILE
 from reconstruct.session import RECON_DIR
 
@@ -23,8 +23,9 @@ OUTPUTS = (export.MESH_FILE, export.REFLECTANCE_FILE, export.REPORT_FILE)
 
 @dataclass
 class Outcome:
-    """What became of one session: ``done``, ``skipped`` (already reconstructed) or
-    ``failed`` (with ``error``), and the figures of its report."""
+    """What became of one session: ``done``, ``incomplete`` (done, but unusable frames were
+    left out: ``error`` lists them), ``skipped`` (already reconstructed) or ``failed`` (with
+    ``error``), and the figures of its report."""
 
     session: str
     status: str
@@ -34,8 +35,11 @@ class Outcome:
 
 
 def is_reconstructed(session: Path) -> bool:
-    """The three outputs of a finished reconstruction are all there."""
-    return all((session / RECON_DIR / name).is_file() for name in OUTPUTS)
+    """A finished export lists the three outputs (a run killed mid-export has no list)."""
+    listed = publish.published(session / RECON_DIR)
+    return listed is not None and all(
+        name in listed and (session / RECON_DIR / name).is_file() for name in OUTPUTS
+    )
 
 
 def report_figures(recon: Path) -> dict[str, Any]:
@@ -53,6 +57,7 @@ def report_figures(recon: Path) -> dict[str, Any]:
         "cost_rendering": terms.get("rendering"),
         "cost_spectral": terms.get("spectral"),
         "recon_seconds": round(sum((report.get("timings_s") or {}).values()), 1),
+        "skipped_frames": len(report.get("skipped_frames") or {}),
     }
     evaluation = recon / EVALUATION_FILE
     if evaluation.is_file():
@@ -74,7 +79,12 @@ def reconstruct_session(
         from reconstruct.runlog import run_logged  # heavy imports stay in the workers
 
         rec = run_logged(root, config, None, verbosity, terminal=False)
-        return Outcome(session, "done", time.perf_counter() - t0, report_figures(rec.recon_dir))
+        seconds, figures = time.perf_counter() - t0, report_figures(rec.recon_dir)
+        skipped = rec.report.get("skipped_frames") or {}
+        if skipped:  # as `rig reconstruct`'s exit 3: not a clean run
+            listed = "; ".join(f"{name}: {why}" for name, why in sorted(skipped.items()))
+            return Outcome(session, "incomplete", seconds, figures, f"frames left out: {listed}")
+        return Outcome(session, "done", seconds, figures)
     except RigError as error:
         return Outcome(session, "failed", time.perf_counter() - t0, error=str(error))
     except Exception as error:  # isolate the batch from any one session's bug

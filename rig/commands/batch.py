@@ -9,6 +9,7 @@ from rich.console import Console
 
 from calibration.errors import RigError
 from reconstruct.pipeline import load_config
+from rig.commands.reconstruct import EXIT_SKIPPED_FRAMES
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -19,7 +20,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "cluster sized to this machine (one single-threaded worker process per core that "
         "memory allows), or an existing one with --scheduler. A failed session is reported "
         "with its error and the others go on; sessions already reconstructed are skipped. "
-        "Each session's log is SESSION/recon/log.txt. Exit status 1 when any session failed.",
+        "Each session's log is SESSION/recon/log.txt. Exit status 1 when any session failed, "
+        "else 3 when one left unusable frames out (as `rig reconstruct`).",
     )
     parser.add_argument("sessions", nargs="*", type=Path, help="session folders")
     parser.add_argument(
@@ -83,11 +85,12 @@ def handle(args: argparse.Namespace) -> int:
     if args.summary is not None:
         console.print(f"summary: {write_csv(args.summary, outcomes)}", highlight=False)
     failed = [o for o in outcomes if o.status == "failed"]
-    for outcome in failed:
+    incomplete = [o for o in outcomes if o.status == "incomplete"]
+    for outcome in failed + incomplete:
         console.print(
-            f"failed: {outcome.session}: {outcome.error}",
+            f"{outcome.status}: {outcome.session}: {outcome.error}",
             highlight=False,
             markup=False,
             soft_wrap=True,
         )
-    return 1 if failed else 0
+    return 1 if failed else EXIT_SKIPPED_FRAMES if incomplete else 0

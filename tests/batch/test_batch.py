@@ -13,6 +13,7 @@ from batch_sessions import FAST, copies
 
 from calibration.errors import RigError
 from rig.batch.sessions import collect
+from rig.batch.task import is_reconstructed
 from rig.cli import main
 
 
@@ -74,3 +75,21 @@ def test_bad_arguments_are_one_line_errors(tmp_path: Path) -> None:
     assert main(["batch", str(tmp_path), "--workers", "0"]) == 2
     assert main(["batch", str(tmp_path), "--workers", "2", "--scheduler", "tcp://x:1"]) == 2
     assert main(["batch"]) == 2
+
+
+def test_a_session_with_an_unusable_frame_is_incomplete_not_done(
+    template: Path, tmp_path: Path
+) -> None:
+    """As `rig reconstruct`'s exit 3: the run is not clean, the table says which frame."""
+    (session,) = copies(template, tmp_path, ["partial"])
+    raw = sorted((session / "raw").rglob("*.dng"))[3]
+    raw.write_bytes(raw.read_bytes()[:4000])  # truncated after capture
+    csv_path = tmp_path / "batch.csv"
+    argv = ["batch", str(session), "--workers", "1", "--config", str(FAST)]
+    assert main([*argv, "--summary", str(csv_path)]) == 3
+    row = read_summary(csv_path)["partial"]
+    assert row["status"] == "incomplete" and row["skipped_frames"] == "1"
+    assert raw.name in row["error"]
+    assert is_reconstructed(session)
+    (session / "recon" / "outputs.json").unlink()  # as a kill mid-export leaves it
+    assert not is_reconstructed(session)
