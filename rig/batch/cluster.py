@@ -29,6 +29,19 @@ def local_size(workers: int | None) -> tuple[int, int]:
     return workers, memory // workers
 
 
+def check_single_threaded(client: Client, scheduler: str) -> None:
+    """A reconstruction redirects its process's stderr and logging into the session's log, so
+    two sessions in one worker process would write into each other's logs."""
+    workers = client.scheduler_info().get("workers", {})
+    shared = sorted(addr for addr, info in workers.items() if int(info.get("nthreads", 1)) > 1)
+    if shared:
+        raise RigError(
+            f"the Dask workers at {scheduler} run several threads each ({shared[0]} and "
+            f"{len(shared) - 1} more): sessions would share a process and mix their logs",
+            "start the workers with `dask worker ADDRESS --nthreads 1` (one process per session)",
+        )
+
+
 @contextmanager
 def open_client(workers: int | None = None, scheduler: str | None = None) -> Iterator[Client]:
     """A client of ``scheduler`` (``tcp://host:port``), else of a new local cluster."""
@@ -41,6 +54,7 @@ def open_client(workers: int | None = None, scheduler: str | None = None) -> Ite
                 "start it (`dask scheduler`) or check --scheduler's address",
             ) from error
         with client:
+            check_single_threaded(client, scheduler)
             yield client
         return
     n, memory = local_size(workers)

@@ -93,3 +93,16 @@ def test_a_session_with_an_unusable_frame_is_incomplete_not_done(
     assert is_reconstructed(session)
     (session / "recon" / "outputs.json").unlink()  # as a kill mid-export leaves it
     assert not is_reconstructed(session)
+
+
+def test_a_scheduler_with_multi_threaded_workers_is_refused() -> None:
+    from distributed import LocalCluster
+
+    from rig.batch.cluster import open_client
+
+    with LocalCluster(
+        n_workers=1, threads_per_worker=2, host="127.0.0.1", dashboard_address=None
+    ) as cluster:
+        with pytest.raises(RigError, match="--nthreads 1"):
+            with open_client(scheduler=cluster.scheduler_address):
+                pass
