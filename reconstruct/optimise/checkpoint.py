@@ -63,7 +63,7 @@ def input_key(inp: OptimiseInput, settings: OptimiseSettings) -> str:
     digest.update(json.dumps(asdict(settings), sort_keys=True, default=str).encode())
     rig, frames = inp.rig, inp.frames
     arrays: list[Any] = [inp.vertices, inp.faces, inp.visibility, inp.basis.B, rig.responses]
-    arrays += [frames.view, frames.illumination, frames.images, frames.valid]
+    arrays += [frames.view, frames.illumination, frames.images, frames.valid, frames.weight]
     arrays += [inp.initial_light, inp.initial_alpha, inp.observed]
     arrays += [np.asarray(p.R) for p in rig.poses] + [np.asarray(p.t) for p in rig.poses]
     arrays += [np.asarray(i.params, dtype=float) for i in rig.intrinsics]

@@ -72,3 +72,11 @@ def test_an_unreadable_checkpoint_starts_afresh(tmp_path: Path, scene: Synthetic
     path = tmp_path / "checkpoint.npz"
     path.write_bytes(b"PK\x03\x04 torn")
     assert Checkpoint(path, input_key(inp, CFG)).load() is None
+
+
+def test_the_key_covers_the_frames_noise_weights(scene: SyntheticScene) -> None:
+    """Ambient subtraction weights each frame; other weights are another problem."""
+    inp = scene.input(scene.vertices, images=True)
+    key = input_key(inp, CFG)
+    inp.frames.weight = np.full(inp.frames.view.size, 0.5)
+    assert input_key(inp, CFG) != key
