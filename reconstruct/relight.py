@@ -20,8 +20,8 @@ import yaml
 from calibration.colorimetry import xyz_weights
 from calibration.errors import RigError
 from calibration.grid import SpectralGrid
+from calibration.importers import read_spectrum
 from calibration.spectra import resample
-from calibration.store import read_spectrum_csv
 from calibration.yamlio import read_yaml
 from reconstruct.camera import Intrinsics, Pose, read_colmap_text
 from reconstruct.raycast import RayCaster
@@ -37,15 +37,14 @@ class Camera:
 
 
 def illuminant_spd(spec: str, grid: SpectralGrid) -> np.ndarray:
-    """A CIE illuminant by name (D65, A, …) or a CSV ``wavelength_nm,power`` on ``grid``."""
-    if spec.lower().endswith(".csv"):
-        path = Path(spec)
-        if not path.is_file():
-            raise RigError(
-                f"illuminant file {path} does not exist", "give a CSV wavelength_nm,power"
-            )
-        w, v = read_spectrum_csv(path, ["power"])
-        return resample(w, v[:, 0], grid, source=str(path))
+    """A CIE illuminant by name (D65, A, FL2, LED-B3, …) or an SPD file on ``grid``: a CSV
+    ``wavelength_nm,power`` or any format `rig calibrate import` reads (OceanView, SpectraWiz)."""
+    path = Path(spec)
+    if path.suffix:  # a file name (CIE names have none); a missing file is a clear error
+        spectrum = read_spectrum(path)
+        return resample(
+            spectrum.wavelengths_nm, spectrum.column(None, "light"), grid, source=str(path)
+        )
     from calibration.defaults import cie_illuminant
 
     return cie_illuminant(spec, grid)

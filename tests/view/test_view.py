@@ -16,7 +16,7 @@ from calibration.colorimetry import reflectance_to_srgb
 from calibration.grid import DEFAULT_GRID
 from reconstruct.export import write_reflectance_npz
 from rig.cli import main
-from rig.view.colour import encode_srgb, illuminant_matrices
+from rig.view.colour import illuminant_matrices
 from rig.view.serve import make_server
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -54,6 +54,12 @@ def recon(tmp_path_factory: pytest.TempPathFactory) -> Path:
     mesh.export(gt / "mesh.ply")
     np.save(gt / "reflectance.npy", reflectance + 0.05)
     return session
+
+
+def encode_srgb(linear: np.ndarray) -> np.ndarray:
+    """The sRGB transfer function on clipped linear values, as the page's JS applies it."""
+    x = np.clip(linear, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
 
 
 def test_page_colour_matrices_match_colour_science() -> None:
