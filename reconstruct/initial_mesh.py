@@ -18,7 +18,7 @@ import logging
 import shutil
 from collections import defaultdict
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +30,7 @@ from calibration.errors import RigError
 from reconstruct import poses as poses_stage
 from reconstruct.board import BoardSpec
 from reconstruct.camera import Intrinsics, Pose
+from reconstruct.config_check import check_types
 from reconstruct.decode import INDEX, DecodeIndex, load_frame
 from reconstruct.dense.board_silhouette import board_silhouette
 from reconstruct.dense.patchmatch import PatchMatchConfig, patchmatch_points
@@ -88,15 +89,27 @@ class MeshConfig:
 
 
 def mesh_config(data: Mapping[str, Any]) -> MeshConfig:
-    """MeshConfig from a mapping whose ``stereo`` section may itself be a mapping."""
+    """MeshConfig from a mapping whose ``stereo`` and ``patchmatch`` sections may themselves be
+    mappings (checked key by key like the top-level sections)."""
     values = dict(data)
-    if isinstance(values.get("stereo"), Mapping):
-        values["stereo"] = StereoConfig(**values["stereo"])
-    if isinstance(values.get("patchmatch"), Mapping):
-        values["patchmatch"] = PatchMatchConfig(**values["patchmatch"])
+    for key, kind in (("stereo", StereoConfig), ("patchmatch", PatchMatchConfig)):
+        if isinstance(values.get(key), Mapping):
+            values[key] = _nested_section(values[key], kind, f"config mesh.{key}")
     if isinstance(values.get("board"), BoardSpec):
         values["board"] = values["board"].to_dict()
     return MeshConfig(**values)
+
+
+def _nested_section(value: Mapping[str, Any], kind: type[Any], where: str) -> Any:
+    known = {f.name for f in fields(kind)}
+    bad = set(value) - known
+    if bad:
+        raise RigError(
+            f"unknown key(s) in {where}: {', '.join(sorted(bad))}",
+            f"use {', '.join(sorted(known))}",
+        )
+    check_types(value, kind(), where)
+    return kind(**value)
 
 
 def load_user_mesh(path: Path) -> trimesh.Trimesh:

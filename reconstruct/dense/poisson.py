@@ -57,7 +57,10 @@ def poisson_mesh(
             raise RigError("Poisson meshing produced no mesh", "check the dense point cloud")
         mesh = read_mesh(dst, process=True)
     if len(mesh.faces) == 0:
-        raise RigError("Poisson meshing produced an empty mesh", "lower mesh.poisson_trim")
+        raise RigError(
+            "Poisson meshing produced an empty mesh",
+            "lower mesh.poisson_trim (mesh.patchmatch.poisson_trim with method patchmatch)",
+        )
     return largest_component(mesh)
 
 
