@@ -3,12 +3,16 @@
 A run writes ``running`` with its PID, host and the process's start time when it begins, the
 stage it is in as it goes, and ``complete`` / ``failed`` / ``interrupted`` (Ctrl-C, SIGTERM) at
 the end. A SIGKILL leaves ``running`` behind: :func:`read_status` reports such a run as
-``interrupted`` once its process is gone (same host, PID not alive or reused), and a new run on
-the same folder refuses to start while the recorded one is still alive.
+``interrupted`` once its process is gone (same host, PID not alive or reused). A run also holds
+an exclusive lock on ``recon/.lock`` (released by the kernel however the process ends), so a
+second run refuses to start while one is alive, and a ``running`` record left by a host whose
+PIDs cannot be checked here (a container's new hostname, a cluster node) is known to be stale
+once the lock is free.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import logging
 import os
@@ -25,6 +29,7 @@ from reconstruct.session import write_bytes_atomically
 log = logging.getLogger("reconstruct")
 
 FILE = "status.json"
+LOCK = ".lock"
 
 
 def _process_start(pid: int) -> str | None:
@@ -88,16 +93,22 @@ class RunStatus:
     def __init__(self, recon_dir: Path) -> None:
         self.path = Path(recon_dir) / FILE
         self.data: dict[str, Any] = {}
+        self._lock: int | None = None
 
     def begin(self) -> None:
-        previous = read_status(self.path.parent)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        previous = self._take_lock()
         if previous is not None and previous.get("status") == "running":
-            if previous.get("pid") != os.getpid():
+            same_host = previous.get("host") == socket.gethostname()
+            if previous.get("pid") != os.getpid() and same_host:  # alive (read_status)
+                self.release()
                 raise RigError(
                     f"a reconstruction is already running on {self.path.parent} "
                     f"({describe(previous)})",
                     "wait for it to finish or stop it first",
                 )
+            if not same_host:  # its lock is free: that run is gone
+                previous.update(status="interrupted", note="its lock was free")
         if previous is not None and previous.get("status") == "interrupted":
             log.warning("the previous run was interrupted (%s): resuming", describe(previous))
         pid = os.getpid()
@@ -111,6 +122,32 @@ class RunStatus:
             "previous": None if previous is None else previous.get("status"),
         }
         self._write()
+
+    def _take_lock(self) -> dict[str, Any] | None:
+        """Hold ``recon/.lock``; the previous status record, read under the lock."""
+        fd = os.open(self.path.parent / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            previous = read_status(self.path.parent)
+            raise RigError(
+                f"a reconstruction is already running on {self.path.parent} "
+                f"({describe(previous) if previous else 'it holds recon/.lock'})",
+                "wait for it to finish or stop it first",
+            ) from None
+        self._lock = fd
+        try:
+            return read_status(self.path.parent)
+        except RigError:
+            self.release()
+            raise
+
+    def release(self) -> None:
+        """Let the next run start (also done by the kernel when the process ends)."""
+        if self._lock is not None:
+            os.close(self._lock)
+            self._lock = None
 
     def stage(self, name: str) -> None:
         self.data["stage"] = name
@@ -139,5 +176,8 @@ def tracked(recon_dir: Path) -> Iterator[RunStatus]:
     except Exception as error:
         status.end("failed", error=" ".join(str(error).split()))
         raise
-    if status.data["status"] == "running":
-        status.end("complete")
+    else:
+        if status.data["status"] == "running":
+            status.end("complete")
+    finally:
+        status.release()

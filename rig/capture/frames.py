@@ -21,7 +21,7 @@ from reconstruct.session import (
 )
 from rig.plans import FrameSpec
 
-INCOMING = ".incoming"  # under raw/: where the camera writes; anything left there is discarded
+INCOMING = ".incoming"  # under raw/: where the camera writes; leftovers go to quarantine/
 TIFF_SUFFIXES = (".tif", ".tiff")
 NPY_SUFFIXES = (".npy",)
 SATURATED_LIMIT = 0.005  # fraction of lit pixels saturated that triggers "shorten the exposure"
@@ -214,8 +214,9 @@ def store_frame(
     """Verify, fsync and rename the camera's file(s) into raw/, then append the manifest line.
     Returns the record and the main file's decoded data (for the checks that follow).
 
-    The manifest line is written last: a kill before it leaves an orphan file (deleted and
-    re-captured on resume), a kill after it leaves a complete frame — never a half one."""
+    The manifest line is written last: a kill before it leaves an orphan file (re-adopted on
+    resume when it verifies, else moved to quarantine/ and captured again: never deleted), a
+    kill after it leaves a complete frame — never a half one."""
     if not captured.paths:
         raise RigError(
             f"the camera delivered no file for frame {spec.frame}",

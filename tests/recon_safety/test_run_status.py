@@ -47,6 +47,25 @@ def test_a_live_run_blocks_a_second_one(tmp_path: Path) -> None:
     assert read_status(tmp_path)["pid"] == os.getpid()  # type: ignore[index]
 
 
+def test_a_run_holding_the_lock_blocks_a_second_one(tmp_path: Path) -> None:
+    first = RunStatus(tmp_path)
+    first.begin()
+    with pytest.raises(RigError, match="already running"):
+        RunStatus(tmp_path).begin()
+    first.release()
+    RunStatus(tmp_path).begin()
+
+
+def test_a_stale_record_from_another_host_does_not_block_forever(tmp_path: Path) -> None:
+    """A container's new hostname, or a cluster node: its PID cannot be checked here, but the
+    lock it held died with it."""
+    record = {"status": "running", "pid": 1, "host": "elsewhere", "stage": "optimise"}
+    (tmp_path / FILE).write_text(json.dumps(record))
+    with tracked(tmp_path) as status:
+        assert status.data["previous"] == "interrupted"
+    assert read_status(tmp_path)["status"] == "complete"  # type: ignore[index]
+
+
 def test_tracked_records_complete_failed_and_interrupted(tmp_path: Path) -> None:
     with tracked(tmp_path):
         pass
