@@ -10,6 +10,7 @@ from rich.console import Console
 from calibration.errors import RigError
 from reconstruct.pipeline import load_config
 from rig.commands.reconstruct import EXIT_SKIPPED_FRAMES
+from rig.outpaths import output_file
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -75,6 +76,8 @@ def handle(args: argparse.Namespace) -> int:
             "--workers sizes a local cluster, but --scheduler names an existing one",
             "drop one of them",
         )
+    if args.summary is not None:  # before hours of work, not after
+        output_file(args.summary, "--summary")
     sessions = collect(args.sessions, args.list_file)
     config = load_config(args.config)
     console = Console(stderr=True)

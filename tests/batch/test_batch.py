@@ -75,6 +75,7 @@ def test_bad_arguments_are_one_line_errors(tmp_path: Path) -> None:
     assert main(["batch", str(tmp_path), "--workers", "0"]) == 2
     assert main(["batch", str(tmp_path), "--workers", "2", "--scheduler", "tcp://x:1"]) == 2
     assert main(["batch"]) == 2
+    assert main(["batch", str(tmp_path), "--summary", str(tmp_path)]) == 2  # a folder: at once
 
 
 def test_a_session_with_an_unusable_frame_is_incomplete_not_done(
