@@ -116,9 +116,6 @@ class FrontResult:
         """The decoded float16 image of a (view, illumination)."""
         return self.decoded_dir / self.frames[(view, illumination)].image
 
-    def saturation_path(self, view: int, illumination: str) -> Path:
-        return self.decoded_dir / self.frames[(view, illumination)].saturated
-
     @property
     def scale_is_metric(self) -> bool:
         return self.pose_summary.scale == "metric"
