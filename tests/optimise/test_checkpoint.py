@@ -3,6 +3,7 @@ ends where an uninterrupted one does; other inputs or settings start afresh."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -78,5 +79,6 @@ def test_the_key_covers_the_frames_noise_weights(scene: SyntheticScene) -> None:
     """Ambient subtraction weights each frame; other weights are another problem."""
     inp = scene.input(scene.vertices, images=True)
     key = input_key(inp, CFG)
-    inp.frames.weight = np.full(inp.frames.view.size, 0.5)
-    assert input_key(inp, CFG) != key
+    weighted = replace(inp.frames, weight=np.full(inp.frames.view.size, 0.5))
+    assert input_key(replace(inp, frames=weighted), CFG) != key
+    assert input_key(inp, CFG) == key  # the shared scene is left as it was
