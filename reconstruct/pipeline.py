@@ -15,6 +15,7 @@ at most the stage in progress and never leaves old and new outputs mixed.
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from collections.abc import Callable, Mapping
@@ -35,6 +36,7 @@ from reconstruct.camera import Intrinsics
 from reconstruct.decode import load_frame
 from reconstruct.forward import response_matrix
 from reconstruct.front import FrontConfig, FrontResult, run_front
+from reconstruct.memory import peak_rss_mb, reset_peak_rss
 from reconstruct.optimise.checkpoint import FILE as CHECKPOINT_FILE
 from reconstruct.optimise.checkpoint import Checkpoint, input_key
 from reconstruct.optimise.mesh import vertex_normals
@@ -46,7 +48,7 @@ from reconstruct.raycast import RayCaster
 from reconstruct.relight import Camera, encode_srgb, relight
 from reconstruct.run_status import RunStatus, tracked
 from reconstruct.session import RECON_DIR, Session
-from reconstruct.stages import record_timing
+from reconstruct.stages import TIMINGS, record_timing
 
 log = logging.getLogger("reconstruct")
 FRONT_SECTIONS = ("decode", "poses", "mesh", "procam", "visibility", "subdivide")
@@ -393,6 +395,20 @@ def run_reconstruction(
     return rec
 
 
+def front_peaks(recon: Path) -> dict[str, float | None]:
+    """Each front stage's peak resident memory (MB) from ``timings.json``; None for a stage
+    this run skipped (done before)."""
+    try:
+        timings = json.loads((recon / TIMINGS).read_text())
+    except (OSError, ValueError):
+        return {}
+    return {
+        name: entry.get("peak_rss_mb")
+        for name, entry in timings.items()
+        if isinstance(entry, dict) and name not in ("optimise", "export")
+    }
+
+
 def _run(
     session: Session,
     conf: dict[str, Any],
@@ -420,9 +436,12 @@ def _run(
     t0 = time.perf_counter()
     status.stage("optimise")
     checkpoint = Checkpoint(recon / "optimise" / CHECKPOINT_FILE, input_key(inp, settings))
+    reset_peak_rss()
     result = optimise(inp, settings, progress, checkpoint)
-    record_timing(recon, "optimise", time.perf_counter() - t0, False)
+    peaks = {**front_peaks(recon), "optimise": round(peak_rss_mb(), 1)}
+    record_timing(recon, "optimise", time.perf_counter() - t0, False, peaks["optimise"])
     t0 = time.perf_counter()
+    reset_peak_rss()
     absolute = front.scale_is_metric
     extra = {
         "reflectance_scale_absolute": bool(absolute),
@@ -438,6 +457,7 @@ def _run(
         "illuminations": sorted({k[1] for k in front.frames}),
         "skipped_frames": dict(front.skipped_frames),
         "timings_s": {"front": t_front, "load_frames": t_load},
+        "peak_rss_mb": peaks,
     }
     status.stage("export")
     staging = staging_dir(recon)
@@ -445,9 +465,12 @@ def _run(
         staging, inp, result, settings, extra
     )
     report["timings_s"]["export"] = time.perf_counter() - t0
+    report["peak_rss_mb"]["export"] = round(peak_rss_mb(), 1)
     export.write_report(report_path, report)
     publish(recon, staging)
-    record_timing(recon, "export", report["timings_s"]["export"], False)
+    record_timing(
+        recon, "export", report["timings_s"]["export"], False, report["peak_rss_mb"]["export"]
+    )
     mesh_path, npz, report_path = (recon / p.name for p in (mesh_path, npz, report_path))
     figures = [recon / p.name for p in figures]
     return Reconstruction(recon, mesh_path, npz, report_path, figures, result, report)

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from reconstruct.memory import peak_rss_mb, reset_peak_rss
 from reconstruct.session import write_bytes_atomically
 
 log = logging.getLogger("reconstruct")
@@ -70,8 +71,11 @@ def is_done(out_dir: Path, digest: str) -> bool:
         return False
 
 
-def record_timing(recon_dir: Path, name: str, seconds: float, skipped: bool) -> None:
-    """Add one stage's wall time to ``recon/timings.json`` (read by the report)."""
+def record_timing(
+    recon_dir: Path, name: str, seconds: float, skipped: bool, peak_rss_mb: float | None = None
+) -> None:
+    """Add one stage's wall time (and its peak resident memory, :mod:`reconstruct.memory`)
+    to ``recon/timings.json`` (read by the report)."""
     path = recon_dir / TIMINGS
     data: dict[str, Any] = {}
     if path.is_file():
@@ -82,6 +86,7 @@ def record_timing(recon_dir: Path, name: str, seconds: float, skipped: bool) -> 
     data[name] = {
         "seconds": round(seconds, 3),
         "skipped": skipped,
+        "peak_rss_mb": None if peak_rss_mb is None else round(peak_rss_mb, 1),
         "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
     write_bytes_atomically(path, json.dumps(data, indent=2).encode())
@@ -106,10 +111,11 @@ def run_stage(
     log.info("%s: running -> %s", name, out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / STAMP).unlink(missing_ok=True)
+    reset_peak_rss()
     work()
     seconds = time.perf_counter() - start
     write_bytes_atomically(out_dir / STAMP, json.dumps({"hash": digest, "stage": name}).encode())
-    record_timing(recon_dir, name, seconds, False)
+    record_timing(recon_dir, name, seconds, False, peak_rss_mb())
     log.info("%s: done in %.2f s", name, seconds)
     return StageRun(name, out_dir, False, seconds)
 
