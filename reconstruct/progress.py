@@ -93,7 +93,11 @@ class IterationProgress:
     ) -> IterationProgress:
         """Caps from the reconstruct config's ``optimise`` section."""
         settings = OptimiseSettings.from_mapping((config or {}).get("optimise"), "config optimise")
-        caps = {"light": settings.light_iterations, "joint": settings.joint_iterations}
+        caps = {
+            "light": settings.light_iterations,
+            "coarse": settings.joint_iterations,
+            "joint": settings.joint_iterations,
+        }
         return cls(caps, console, show)
 
     def __enter__(self) -> IterationProgress:

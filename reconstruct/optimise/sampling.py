@@ -8,9 +8,13 @@ gradient (used for ``∂y_obs/∂x``) is exact inside each pixel cell.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
+from scipy.ndimage import gaussian_filter
 
 from reconstruct.camera import Intrinsics, Pose
+from reconstruct.optimise.problem import Frames
 
 
 def bilinear(
@@ -67,6 +71,25 @@ def sample_taps(
         return value, None
     du = d0 + fr * (d1 - d0)
     return value, np.stack([du, dv], axis=-1)
+
+
+def blur_frames(frames: Frames, sigma: np.ndarray) -> Frames:
+    """``frames`` with each image blurred by a Gaussian of ``sigma[view]`` pixels — a coarse
+    level, whose bilinear gradient reaches about σ. Normalised by the blurred validity mask,
+    so saturated pixels do not bleed in; a pixel stays valid where valid ones carry more than
+    half of its weight."""
+    assert frames.images is not None and frames.valid is not None
+    images = np.empty_like(frames.images)
+    valid = np.empty_like(frames.valid)
+    for f in range(frames.count):
+        s = float(sigma[frames.view[f]])
+        mask = frames.valid[f].astype(images.dtype)
+        weight = gaussian_filter(mask, s, mode="nearest")
+        kept = np.where(frames.valid[f][..., None], frames.images[f], 0).astype(images.dtype)
+        blurred = gaussian_filter(kept, (s, s, 0), mode="nearest")
+        valid[f] = weight > 0.5
+        images[f] = blurred / np.maximum(weight, 1e-6)[..., None]
+    return replace(frames, images=images, valid=valid)
 
 
 def taps_valid(

@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -23,7 +23,7 @@ from reconstruct.optimise.checkpoint import Checkpoint, OptimiseState
 from reconstruct.optimise.cost import JointCost, Robust
 from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
 from reconstruct.optimise.problem import Frames, LightMode, Observations, Problem, Rig, Weights
-from reconstruct.optimise.sampling import bilinear, taps_valid
+from reconstruct.optimise.sampling import bilinear, blur_frames, taps_valid
 from reconstruct.optimise.solver import IterationRecord, SolverSettings, levenberg_marquardt
 from reconstruct.optimise.uncertainty import (
     VertexUncertainty,
@@ -72,6 +72,15 @@ class OptimiseSettings:
     max_step_edges: float = 0.5
     max_total_edges: float = 2.0
     min_views: int = 2
+    # Coarse to fine: the rendering term's disparity cue reaches about as far as the blur of
+    # the images it samples, so a start a few pixels off is out of reach at full resolution.
+    # With ``coarse_blur_px`` > 0 the light stage and then ``coarse_levels`` joint stages sample
+    # images blurred by σ = coarse_blur_px, coarse_blur_px / 2, … (pixels at the median view's
+    # scale; nearer views are blurred more, so every view blurs the same patch of surface),
+    # and a vertex may move up to σ per coarse stage (the total limit grows by the same);
+    # the ``outer_iterations`` full-resolution stages follow.
+    coarse_blur_px: float = 0.0
+    coarse_levels: int = 2
     settle_position: float = 0.02  # stop when no vertex moved more than this × mean edge length
     settle_light_m: float = 1e-4
     sigma_chroma: float = 0.03
@@ -274,12 +283,11 @@ def limit_motion(
     X: np.ndarray,
     X_prev: np.ndarray,
     X0: np.ndarray,
-    scale_prev: np.ndarray,
-    scale0: np.ndarray,
-    cfg: OptimiseSettings,
+    step_radius: np.ndarray,
+    total_radius: np.ndarray,
 ) -> np.ndarray:
-    """Project each vertex back into its trust regions: a ball of ``max_step_edges`` local edge
-    lengths around its stage start, then one of ``max_total_edges`` around the initial mesh."""
+    """Project each vertex back into its trust regions: a ball of ``step_radius`` around its
+    stage start, then one of ``total_radius`` around the initial mesh (metres, per vertex)."""
 
     def clamp(x: np.ndarray, centre: np.ndarray, radius: np.ndarray) -> np.ndarray:
         d = x - centre
@@ -287,8 +295,26 @@ def limit_motion(
         factor = np.minimum(1.0, radius / np.maximum(norm, 1e-300))
         return centre + d * factor[:, None]
 
-    X = clamp(X, X_prev, cfg.max_step_edges * scale_prev)
-    return clamp(X, X0, cfg.max_total_edges * scale0)
+    return clamp(clamp(X, X_prev, step_radius), X0, total_radius)
+
+
+def coarse_blurs(cfg: OptimiseSettings, images: bool) -> list[float]:
+    """Blur σ (px) of each coarse level, coarsest first; none without images to blur."""
+    if cfg.coarse_blur_px <= 0 or not images or not cfg.optimise_positions:
+        return []
+    return [cfg.coarse_blur_px / 2**k for k in range(cfg.coarse_levels)]
+
+
+def view_pixel_sizes(X: np.ndarray, inp: OptimiseInput) -> np.ndarray:
+    """Metres per pixel of each view at the object (median depth of its visible vertices /
+    focal length); views that see nothing take the median of the others."""
+    out = np.full(inp.rig.n_views, np.nan)
+    for c, (pose, intr) in enumerate(zip(inp.rig.poses, inp.rig.intrinsics, strict=True)):
+        seen = inp.visibility[:, c]
+        if seen.any():
+            depth = pose.to_camera(X[seen])[:, 2]
+            out[c] = float(np.median(depth)) / float(intr.K[0, 0])
+    return np.where(np.isfinite(out), out, np.nanmedian(out))
 
 
 def initial_reflectance(
@@ -410,10 +436,27 @@ def optimise(
         )
         return result.theta
 
-    last_outer = cfg.outer_iterations if cfg.optimise_positions else 0
+    blurs = coarse_blurs(cfg, inp.observed is None)
+    last_outer = len(blurs) + cfg.outer_iterations if cfg.optimise_positions else 0
     free_light = cfg.light_mode != "fixed"
     X0 = X.copy()
     scale0 = edge_scale(X0, adjacency(inp.faces, len(X0)))
+    # Coarse levels: one σ in metres at the object for all views, each view's σ in its pixels.
+    pixel = view_pixel_sizes(X0, inp) if blurs else np.ones(n_views)
+    pixel_ref = float(np.median(pixel))
+    total_radius = cfg.max_total_edges * scale0 + pixel_ref * sum(blurs)
+    levels: dict[int, OptimiseInput] = {}
+
+    def level(outer: int) -> OptimiseInput:
+        """The input of joint stage ``outer`` (light stage: 0): blurred frames while coarse."""
+        k = max(outer, 1) - 1
+        if k >= len(blurs):
+            return inp
+        if k not in levels:
+            levels.clear()  # one blurred copy of the images at a time
+            sigma = blurs[k] * pixel_ref / pixel
+            levels[k] = replace(inp, frames=blur_frames(inp.frames, sigma))
+        return levels[k]
 
     def save(stage: int, done: bool, theta: np.ndarray, problem: Problem) -> None:
         if checkpoint is None:
@@ -438,7 +481,7 @@ def optimise(
     else:
         t0 = time.perf_counter()
         A0 = np.zeros((len(X), nb)) if inp.initial_alpha is None else np.asarray(inp.initial_alpha)
-        problem = build_problem(inp, X, light, cfg)
+        problem = build_problem(level(0), X, light, cfg)
         if problem.obs.count == 0:
             raise RigError(
                 "no vertex is observed in any frame (all outside the images, saturated or "
@@ -459,7 +502,8 @@ def optimise(
         t0 = time.perf_counter()
         X_prev, _, light_prev = problem.unpack(theta)
         X_prev, light_prev = X_prev.copy(), light_prev.copy()
-        problem = build_problem(inp, X_prev, light_prev, cfg)
+        coarse = outer <= len(blurs)
+        problem = build_problem(level(outer), X_prev, light_prev, cfg)
         seconds["shadows"] = seconds.get("shadows", 0.0) + time.perf_counter() - t0
         # Vertices no view observes have no data term: only the geometric term (blind to
         # tangential motion) would move them, so they keep their positions; so do vertices
@@ -471,19 +515,26 @@ def optimise(
         directions = None
         if cfg.position_motion == "normal":
             directions, _ = vertex_normals(X_prev, problem.faces)
-        theta = run("joint", outer, problem, theta, mask, cfg.joint_iterations, directions)
+        stage = "coarse" if coarse else "joint"
+        theta = run(stage, outer, problem, theta, mask, cfg.joint_iterations, directions)
         X_new, _, light_new = problem.unpack(theta)
-        X_new[:] = limit_motion(X_new, X_prev, X0, problem.weights.scale, scale0, cfg)
+        step_radius = cfg.max_step_edges * problem.weights.scale
+        if coarse:  # the blurred cue reaches σ: let the vertices follow it
+            step_radius = np.maximum(step_radius, blurs[outer - 1] * pixel_ref)
+        X_new[:] = limit_motion(X_new, X_prev, X0, step_radius, total_radius)
         moved = float(np.max(np.linalg.norm(X_new - X_prev, axis=1)))
         light_moved = float(np.max(np.linalg.norm(light_new - light_prev, axis=1)))
         tol = cfg.settle_position * float(np.mean(problem.weights.scale))
         log.info("outer %d: vertices moved ≤ %.3g m, light ≤ %.3g m", outer, moved, light_moved)
-        settled = moved <= tol and light_moved <= cfg.settle_light_m
+        settled = not coarse and moved <= tol and light_moved <= cfg.settle_light_m
         save(outer, settled, theta, problem)
         if settled:
             break
     t0 = time.perf_counter()
-    solved = cfg.optimise_positions and cfg.outer_iterations > 0
+    if problem.frames is not inp.frames:  # ended on a coarse level: judge it at full resolution
+        X, _, light = problem.unpack(theta)
+        problem = build_problem(inp, X, light, cfg)
+    solved = cfg.optimise_positions and last_outer > 0
     o = problem.obs
     views = np.bincount(o.vertex[o.pair_start], minlength=problem.n_vertices)
     uncertainty = vertex_uncertainty(

@@ -102,19 +102,26 @@ def make_scene(
     image_size: tuple[int, int] | None = None,
     seed: int = 0,
     ambient: float = 0.0,
+    voronoi: int = 0,
 ) -> SyntheticScene:
     """A bumpy sphere (radius 5 cm) seen from ``n_views`` cameras 30 cm away, each view under
     every illumination; ``image_size`` (W, H) also renders images for the sampling path.
     ``ambient`` > 0 (images only) adds a uniform illuminant-A room light of that level
     relative to the bulb at the camera distance to every frame, and one bulb-off frame per
-    view (``ambient_images``), each with its own noise."""
+    view (``ambient_images``), each with its own noise. The reflectance is 4 patches, or with
+    ``voronoi`` > 0 that many Voronoi cells around random directions (more edges: more of the
+    rendering term's disparity cue, like the external-renderer scenes' 24 patches)."""
     rng = np.random.default_rng(seed)
     mesh = bumpy_sphere(subdivisions)
     X, F = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     basis = default_basis()
-    patches = training_reflectances()[rng.choice(214, 4, replace=False)]
     d = X / np.linalg.norm(X, axis=1, keepdims=True)
-    label = (d[:, 0] > 0).astype(int) + 2 * (d[:, 2] > 0.3).astype(int)
+    if voronoi:
+        seeds = rng.normal(size=(voronoi, 3))
+        label = np.argmax(d @ (seeds / np.linalg.norm(seeds, axis=1, keepdims=True)).T, axis=1)
+    else:
+        label = (d[:, 0] > 0).astype(int) + 2 * (d[:, 2] > 0.3).astype(int)
+    patches = training_reflectances()[rng.choice(214, max(voronoi, 4), replace=False)]
     refl = basis.reconstruct(basis.project(patches[label]))
     alpha = basis.project(refl)
     responses = default_responses(illuminations)

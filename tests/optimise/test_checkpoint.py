@@ -82,3 +82,22 @@ def test_the_key_covers_the_frames_noise_weights(scene: SyntheticScene) -> None:
     weighted = replace(inp.frames, weight=np.full(inp.frames.view.size, 0.5))
     assert input_key(replace(inp, frames=weighted), CFG) != key
     assert input_key(inp, CFG) == key  # the shared scene is left as it was
+
+
+@pytest.mark.parametrize("interrupt_in", ["coarse 2", "joint 3"])
+def test_coarse_to_fine_resumes_at_its_level(
+    tmp_path: Path, image_scene: SyntheticScene, interrupt_in: str
+) -> None:
+    cfg = OptimiseSettings(
+        outer_iterations=1, light_iterations=2, joint_iterations=2, coarse_blur_px=3.0
+    )
+    inp = image_scene.input(image_scene.vertices + 0.0005, images=True)
+    reference = optimise(inp, cfg)
+    checkpoint = Checkpoint(tmp_path / "checkpoint.npz", input_key(inp, cfg))
+    with pytest.raises(Stop):
+        optimise(inp, cfg, stop_in(interrupt_in), checkpoint)
+    seen: list[str] = []
+    resumed = optimise(inp, cfg, lambda name, rec: seen.append(name), checkpoint)
+    assert seen[0] == interrupt_in  # resumed at the interrupted stage, on its level's images
+    np.testing.assert_array_equal(resumed.vertices, reference.vertices)
+    np.testing.assert_array_equal(resumed.light, reference.light)
