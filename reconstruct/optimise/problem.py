@@ -68,7 +68,6 @@ class Observations:
     view: np.ndarray
     illumination: np.ndarray
     fixed_rgb: np.ndarray | None = None
-    vertex_start: np.ndarray = field(init=False)
     pair_start: np.ndarray = field(init=False)
     per_vertex: np.ndarray = field(init=False)
 
@@ -99,24 +98,12 @@ class Observations:
         v, c = self.vertex, self.view
         new_vertex = np.r_[True, v[1:] != v[:-1]] if v.size else np.zeros(0, bool)
         new_pair = new_vertex | (np.r_[True, c[1:] != c[:-1]] if v.size else new_vertex)
-        self.vertex_start = np.flatnonzero(new_vertex)
         self.pair_start = np.flatnonzero(new_pair)
         self.per_vertex = np.bincount(v, minlength=n_vertices)
 
     @property
     def count(self) -> int:
         return int(self.vertex.size)
-
-    def subset(self, keep: np.ndarray, n_vertices: int) -> Observations:
-        obs = Observations(
-            self.vertex[keep],
-            self.frame[keep],
-            self.view[keep],
-            self.illumination[keep],
-            None if self.fixed_rgb is None else self.fixed_rgb[keep],
-        )
-        obs._index(n_vertices)
-        return obs
 
 
 @dataclass
