@@ -211,6 +211,12 @@ def sfm_image_name(view: int) -> str:
     return f"view_{view:04d}.png"
 
 
+def list_unusable(bad: Mapping[str, str]) -> str:
+    """``frame: why; …`` for one-line messages (the decode stage's, the reconstruct and batch
+    commands')."""
+    return "; ".join(f"{name}: {why}" for name, why in sorted(bad.items()))
+
+
 def _bad(conf: DecodeConfig, bad: dict[str, str]) -> None:
     for name, why in bad.items():
         log.warning(
@@ -220,9 +226,8 @@ def _bad(conf: DecodeConfig, bad: dict[str, str]) -> None:
             ", skipped" if conf.on_bad_frame == "skip" else "",
         )
     if bad and conf.on_bad_frame == "stop":
-        listed = "; ".join(f"{name}: {why}" for name, why in bad.items())
         raise RigError(
-            f"{len(bad)} frame(s) are unusable: {listed}",
+            f"{len(bad)} frame(s) are unusable: {list_unusable(bad)}",
             "recapture them, restore them from a backup, or set decode.on_bad_frame: skip",
         )
 

@@ -87,6 +87,14 @@ def describe(data: dict[str, Any] | None) -> str:
     return line
 
 
+def _already_running(recon_dir: Path, previous: dict[str, Any] | None) -> RigError:
+    what = describe(previous) if previous else f"it holds {LOCK}"
+    return RigError(
+        f"a reconstruction is already running on {recon_dir} ({what})",
+        "wait for it to finish or stop it first",
+    )
+
+
 class RunStatus:
     """The status record of this process's run on one recon folder."""
 
@@ -102,11 +110,7 @@ class RunStatus:
             same_host = previous.get("host") == socket.gethostname()
             if previous.get("pid") != os.getpid() and same_host:  # alive (read_status)
                 self.release()
-                raise RigError(
-                    f"a reconstruction is already running on {self.path.parent} "
-                    f"({describe(previous)})",
-                    "wait for it to finish or stop it first",
-                )
+                raise _already_running(self.path.parent, previous)
             if not same_host:  # its lock is free: that run is gone
                 previous.update(status="interrupted", note="its lock was free")
         if previous is not None and previous.get("status") == "interrupted":
@@ -130,12 +134,7 @@ class RunStatus:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             os.close(fd)
-            previous = read_status(self.path.parent)
-            raise RigError(
-                f"a reconstruction is already running on {self.path.parent} "
-                f"({describe(previous) if previous else 'it holds recon/.lock'})",
-                "wait for it to finish or stop it first",
-            ) from None
+            raise _already_running(self.path.parent, read_status(self.path.parent)) from None
         self._lock = fd
         try:
             return read_status(self.path.parent)

@@ -15,6 +15,7 @@ from typing import Any
 
 from calibration.errors import RigError
 from reconstruct import export, publish
+from reconstruct.decode import list_unusable
 from reconstruct.evaluate import EVALUATION_FILE
 from reconstruct.session import RECON_DIR
 
@@ -82,8 +83,8 @@ def reconstruct_session(
         seconds, figures = time.perf_counter() - t0, report_figures(rec.recon_dir)
         skipped = rec.report.get("skipped_frames") or {}
         if skipped:  # as `rig reconstruct`'s exit 3: not a clean run
-            listed = "; ".join(f"{name}: {why}" for name, why in sorted(skipped.items()))
-            return Outcome(session, "incomplete", seconds, figures, f"frames left out: {listed}")
+            message = f"frames left out: {list_unusable(skipped)}"
+            return Outcome(session, "incomplete", seconds, figures, message)
         return Outcome(session, "done", seconds, figures)
     except RigError as error:
         return Outcome(session, "failed", time.perf_counter() - t0, error=str(error))

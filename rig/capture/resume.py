@@ -47,15 +47,21 @@ class Orphan:
     index: int  # 0: the frame's main file; n: its n-th companion (e.g. the JPEG)
 
 
+def _free_name(path: Path) -> Path:
+    """``path``, or ``stem.N.suffix`` beside it for the first N not taken: nothing there is
+    ever overwritten."""
+    target, n = path, 1
+    while target.exists():
+        target = path.with_name(f"{path.stem}.{n}{path.suffix}")
+        n += 1
+    return target
+
+
 def quarantine(session_dir: Path, file: Path, reason: str, warn: Warn) -> Path:
     """Move ``file`` into SESSION/quarantine/ (a free name), log why, and warn."""
     folder = session_dir / QUARANTINE_DIR
     folder.mkdir(exist_ok=True)
-    target = folder / file.name
-    n = 1
-    while target.exists():
-        target = folder / f"{file.stem}.{n}{file.suffix}"
-        n += 1
+    target = _free_name(folder / file.name)
     os.replace(file, target)
     fsync_dir(folder)
     fsync_dir(file.parent)
@@ -139,16 +145,19 @@ def _drop_quarantined(session_dir: Path, records: list[FrameRecord]) -> list[Fra
             continue  # a line torn by a kill
         if isinstance(entry, dict) and "sha256" in str(entry.get("reason")):
             moved.add(str(entry.get("was")))
-    gone = [
+    keep = [
         r for r in records
-        if any(p in moved and not (session_dir / p).is_file() for p in record_paths(r))
+        if not any(p in moved and not (session_dir / p).is_file() for p in record_paths(r))
     ]
-    if not gone:
-        return records
-    keep = [r for r in records if r not in gone]
-    manifest = session_dir / MANIFEST_FILE
-    write_bytes_atomically(manifest, "".join(r.to_json() + "\n" for r in keep).encode())
+    if len(keep) < len(records):
+        _rewrite_manifest(session_dir, keep)
     return keep
+
+
+def _rewrite_manifest(session_dir: Path, records: list[FrameRecord]) -> None:
+    """Replace the manifest with ``records``' lines, atomically."""
+    lines = "".join(r.to_json() + "\n" for r in records)
+    write_bytes_atomically(session_dir / MANIFEST_FILE, lines.encode())
 
 
 def _check_against_plan(
@@ -189,18 +198,14 @@ def _rehash(session_dir: Path, records: list[FrameRecord], warn: Warn) -> list[F
     manifest = session_dir / MANIFEST_FILE
     (session_dir / QUARANTINE_DIR).mkdir(exist_ok=True)
     stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y%m%dT%H%M%S")
-    backup = session_dir / QUARANTINE_DIR / f"manifest-{stamp}.jsonl"
-    n = 1
-    while backup.exists():  # two resumes within a second keep both backups
-        backup = backup.with_name(f"manifest-{stamp}.{n}.jsonl")
-        n += 1
-    shutil.copy2(manifest, backup)
+    # two resumes within a second keep both backups
+    shutil.copy2(manifest, _free_name(session_dir / QUARANTINE_DIR / f"manifest-{stamp}.jsonl"))
     for record in bad:
         for path in record_paths(record):
             file = session_dir / path
             quarantine(session_dir, file, "its sha256 differs from the manifest", warn)
     keep = [r for r in records if r not in bad]
-    write_bytes_atomically(manifest, "".join(r.to_json() + "\n" for r in keep).encode())
+    _rewrite_manifest(session_dir, keep)
     return keep
 
 

@@ -11,6 +11,7 @@ from rich.table import Table
 from rich.text import Text
 
 from calibration.errors import RigError
+from reconstruct.decode import list_unusable
 from reconstruct.pipeline import Reconstruction, load_config
 from reconstruct.run_status import describe, read_status
 from reconstruct.runlog import run_logged
@@ -86,11 +87,11 @@ def handle(args: argparse.Namespace) -> int:
     print(rec.recon_dir)
     skipped = rec.report["skipped_frames"]
     if skipped:
-        listed = "; ".join(f"{name}: {why}" for name, why in sorted(skipped.items()))
         console.print(
             Text.assemble(
                 ("warning:", "bold yellow"),
-                f" {len(skipped)} frame(s) were unusable and left out ({listed}) — recapture "
+                f" {len(skipped)} frame(s) were unusable and left out "
+                f"({list_unusable(skipped)}) — recapture "
                 "or restore them and run again, or set decode.on_bad_frame: stop to refuse",
             ),
             soft_wrap=True,
