@@ -30,12 +30,20 @@ import scipy.sparse as sp
 
 from calibration.spectra import second_difference_matrix
 from reconstruct.forward import render_values, shading
+from reconstruct.optimise.kernels import (
+    accumulate_normal_equations,
+    gram_products,
+    lower_products,
+    sample_bilinear,
+)
 from reconstruct.optimise.mesh import NormalJacobian, adjacency, vertex_normals
 from reconstruct.optimise.problem import Problem
-from reconstruct.optimise.sampling import bilinear_taps, project_with_jacobian, sample_taps
+from reconstruct.optimise.sampling import bilinear_taps, project_with_jacobian
 
 Robust = Literal["none", "huber", "cauchy"]
 TERMS = ("rendering", "spectral", "photometric", "geometric")
+_NO_BLOCKS = np.empty((0, 3, 3))  # positions fixed: no normal Jacobian
+_NO_GEOMETRIC = np.empty((0, 3))
 
 
 def _r_factor(m: np.ndarray) -> np.ndarray:
@@ -50,15 +58,6 @@ def _summation(index: np.ndarray, n_rows: int) -> sp.csr_array:
     return sp.csr_array(
         (np.ones(m), (np.asarray(index, dtype=np.int64), np.arange(m))), shape=(n_rows, m)
     )
-
-
-def _spread(pair_vertex: np.ndarray, n_vertices: int, values: np.ndarray) -> sp.csr_array:
-    """(P × r·N) matrix whose row p holds ``values[p]`` (r,) at vertex ``pair_vertex[p]``'s r
-    columns; its transpose times a (P, c) array gives ``Σ_p values_p ⊗ rows_p`` per vertex
-    (N·r, c) without forming the (P, r, c) outer products."""
-    p, r = values.shape
-    cols = (r * pair_vertex[:, None] + np.arange(r)).ravel()
-    return sp.csr_array((values.ravel(), cols, r * np.arange(p + 1)), shape=(p, r * n_vertices))
 
 
 @dataclass
@@ -152,13 +151,9 @@ class JointCost:
         self.pair_light = self.light_index[ps]
         self.view_pairs = [np.flatnonzero(self.pair_view == c) for c in range(p.rig.n_views)]
         self.n_illuminations = self.Q.shape[0]
-        self.obs_to_pair = _summation(self.obs_pair, ps.size)
-        self.obs_to_group = _summation(
-            o.vertex * self.n_illuminations + o.illumination, n * self.n_illuminations
-        )
         self.pair_to_light = _summation(self.pair_light, p.n_light // 3)
-        self.pair_to_vertex = _summation(self.pair_vertex, n)
-        self.obs_by_frame = np.argsort(o.frame, kind="stable")
+        self.vertex_pairs = np.searchsorted(self.pair_vertex, np.arange(n + 1))
+        self.pair_obs = np.r_[ps, o.count]
         self._evaluated: tuple[np.ndarray, bool, Geometry, RenderState] | None = None
         self._sampled: (
             tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None] | None
@@ -260,17 +255,8 @@ class JointCost:
             frac[idx, 0], frac[idx, 1] = fc[:, 0], fr[:, 0]
             if duv is not None:
                 duv[idx] = jac
-        # Gather frame by frame (cache-friendly), then back to observation order.
-        order = self.obs_by_frame
-        op = self.obs_pair[order]
-        taps = (index[op], frac[op, :1], frac[op, 1:])
-        value, grad = sample_taps(images, o.frame[order], taps, gradient=gradient)
-        y_obs = np.empty_like(value)
-        y_obs[order] = value
-        image_grad = None
-        if grad is not None:
-            image_grad = np.empty_like(grad)
-            image_grad[order] = grad
+        y_obs, grad = sample_bilinear(images, o.frame, self.obs_pair, index, frac, gradient)
+        image_grad = grad if gradient else None
         self._sampled = (np.array(X, copy=True), y_obs, image_grad, duv)
         return y_obs, image_grad, duv
 
@@ -393,8 +379,9 @@ class JointCost:
         u = [δx, δn, δα] is ``A_o = w (c_o u_pᵀ + V_o)`` with ``u_p = [−g, h, 0]`` (shared by the
         frames of one view: g and h depend only on the vertex, its normal and the view's light)
         and ``V_o = [−G_o, 0, s Q_k]``. Expanding ``A_oᵀA_o`` lets the sums run over pairs and
-        (vertex, illumination) groups — sparse 0/1 products over all columns at once — instead
-        of k×k products per observation. The light enters through ``w c_o g̃_pᵀ`` (g̃ = M_cᵀ g),
+        (vertex, illumination) groups instead of k×k products per observation; one compiled
+        pass over the observations accumulates them (:mod:`reconstruct.optimise.kernels`).
+        The light enters through ``w c_o g̃_pᵀ`` (g̃ = M_cᵀ g),
         so its coupling to vertex i is ``C_i = Σ_p a_p g̃_pᵀ`` with ``a_p = Σ_o A_oᵀ w c_o``.
         """
         p, o = self.p, self.p.obs
@@ -404,99 +391,36 @@ class JointCost:
         terms = self._terms(A, geo, st)
         _, rw = self._robust(st.error)
         wt = self.obs_weight * rw
-        w2 = wt**2
-        n, nb = p.n_vertices, p.n_basis
-        n_ill = self.n_illuminations
-        k = 6 + nb
-        col = st.colour
-        r = wt[:, None] * st.error
-        grad, duv = st.image_grad, st.proj_jac  # G_o = grad_o duv_p
-        images = grad is not None and duv is not None
-        # Observation sums per pair: |w c|², w² Vᵀc (x part −Gᵀc, α part s Qᵀc), w c·r, and
-        # the G terms through the image gradient: G's projection Jacobian is the pair's.
-        per_obs = np.zeros((o.count, 10 + nb if images else 5 + nb))
-        per_obs[:, 0] = w2 * np.einsum("mc,mc->m", col, col)
-        for ill in range(n_ill):
-            idx = o.illumination == ill
-            per_obs[idx, 1 : 1 + nb] = col[idx] @ self.Q[ill]
-        per_obs[:, 1 : 1 + nb] *= w2[:, None]
-        per_obs[:, 1 + nb] = wt * np.einsum("mc,mc->m", col, r)
-        if images:
-            assert grad is not None
-            g0, g1 = grad[:, :, 0], grad[:, :, 1]
-            per_obs[:, 2 + nb] = np.einsum("mc,mc->m", g0, g0)
-            per_obs[:, 3 + nb] = np.einsum("mc,mc->m", g0, g1)
-            per_obs[:, 4 + nb] = np.einsum("mc,mc->m", g1, g1)
-            per_obs[:, 5 + nb : 7 + nb] = np.einsum("mca,mc->ma", grad, col)
-            per_obs[:, 2 + nb : 7 + nb] *= w2[:, None]
-            per_obs[:, 7 + nb : 9 + nb] = wt[:, None] * np.einsum("mca,mc->ma", grad, r)
-        pair = self.obs_to_pair @ per_obs
-        del per_obs  # the (M, ·) temporaries dominate the peak memory: free them early
-        cc = pair[:, 0]
-        pair_e = pair[:, 1 + nb]
-        u6 = np.concatenate([-st.g, st.h], axis=1)  # (P, 6)
-        a = np.zeros((len(cc), k))
-        a[:, 6:] = st.pair_s[:, None] * pair[:, 1 : 1 + nb]  # e_p = Σ_o w² V_oᵀ c_o so far
-        if images:
-            assert duv is not None
-            a[:, :3] = -np.einsum("pab,pa->pb", duv, pair[:, 5 + nb : 7 + nb])
-        a[:, :6] += cc[:, None] * u6  # a_p = e_p + cc_p u_p
-        # Σ_p u_p [a_p, cc_p u_p, e_p] per vertex: Σ u aᵀ = cc u uᵀ + u eᵀ.
-        rhs = np.concatenate([a, cc[:, None] * u6, pair_e[:, None]], axis=1)
-        sums = (_spread(self.pair_vertex, n, u6).T @ rhs).reshape(n, 6, k + 7)
-        ua, ccuu = sums[:, :, :k], sums[:, :, k : k + 6]
-        gram = np.zeros((n, k, k))
-        gram[:, :6, :] = ua
-        gram[:, 6:, :6] = ua[:, :, 6:].transpose(0, 2, 1)
-        gram[:, :6, :6] += ua[:, :, :6].transpose(0, 2, 1) - ccuu
-        grad_u = np.zeros((n, k))
-        grad_u[:, :6] = sums[:, :, k + 6]
-        # V terms: s² QᵀQ and s Qᵀr by (vertex, illumination); with images, per pair
-        # duvᵀ (Σ w² gradᵀgrad) duv, −duvᵀ Σ w gradᵀr and −duvᵀ Σ w² s gradᵀQ_k.
-        groups = np.empty((o.count, 4))
-        groups[:, 0] = w2 * st.s**2
-        groups[:, 1:4] = (wt * st.s)[:, None] * r
-        sums = (self.obs_to_group @ groups).reshape(n, n_ill, 4)
-        gram[:, 6:, 6:] += np.einsum("vk,kab->vab", sums[:, :, 0], self.QtQ)
-        grad_u[:, 6:] += np.einsum("vkc,kcb->vb", sums[:, :, 1:4], self.Q)
-        if images:
-            assert grad is not None and duv is not None
-            gq = np.empty((o.count, 2, nb))
-            grad_t = np.ascontiguousarray(grad.transpose(0, 2, 1))
-            for ill in range(n_ill):
-                idx = o.illumination == ill
-                gq[idx] = (grad_t[idx].reshape(-1, 3) @ self.Q[ill]).reshape(-1, 2, nb)
-            gq *= (w2 * st.s)[:, None, None]
-            pg = (self.obs_to_pair @ gq.reshape(-1, 2 * nb)).reshape(-1, 2, nb)
-            del gq, grad_t
-            s2 = pair[:, 2 + nb : 5 + nb]
-            gtg = np.stack([s2[:, 0], s2[:, 1], s2[:, 1], s2[:, 2]], 1).reshape(-1, 2, 2)
-            per_pair = np.concatenate(
-                [
-                    (duv.transpose(0, 2, 1) @ gtg @ duv).reshape(-1, 9),
-                    np.einsum("pab,pa->pb", duv, pair[:, 7 + nb : 9 + nb]),
-                    (duv.transpose(0, 2, 1) @ pg).reshape(-1, 3 * nb),
-                ],
-                axis=1,
-            )
-            vsum = self.pair_to_vertex @ per_pair
-            gram[:, :3, :3] += vsum[:, :9].reshape(n, 3, 3)
-            grad_u[:, :3] -= vsum[:, 9:12]
-            xa = -vsum[:, 12:].reshape(n, 3, nb)
-            gram[:, :3, 6:] += xa
-            gram[:, 6:, :3] += xa.transpose(0, 2, 1)
-        # The light: g̃ = M_cᵀ g per pair, its coupling C_i and its own block.
-        gl = np.empty_like(st.g)
+        gl = np.empty_like(st.g)  # g̃ = M_cᵀ g per pair
         for c, idx in enumerate(self.view_pairs):
             gl[idx] = st.g[idx] @ self.light_maps[c]
+        grad, duv = st.image_grad, st.proj_jac
+        images = grad is not None and duv is not None
+        shared = p.n_light == 3
+        gram, grad_u, a, cc, pair_e, coupling = accumulate_normal_equations(
+            self.vertex_pairs,
+            self.pair_obs,
+            o.illumination,
+            wt,
+            st.colour,
+            wt[:, None] * st.error,
+            st.s,
+            grad if images else np.empty((0, 3, 2)),
+            st.pair_s,
+            st.g,
+            st.h,
+            duv if images else np.empty((0, 2, 3)),
+            gl,
+            self.Q,
+            self.QtQ,
+            shared,
+        )
         light_block = (self.pair_to_light @ (cc[:, None] * _outer(gl, gl))).reshape(-1, 3, 3)
         light_grad = self.pair_to_light @ (gl * pair_e[:, None])
-        coupling: np.ndarray | sp.csr_array
-        if p.n_light == 3:
-            coupling = (_spread(self.pair_vertex, n, gl).T @ a).reshape(n, 3, k)
-            coupling = coupling.transpose(0, 2, 1).copy()  # (N, k, 3)
-        else:
-            coupling = _pair_coupling(self.pair_vertex, self.pair_light, a, gl, n, p.n_light)
+        if not shared:
+            coupling = _pair_coupling(
+                self.pair_vertex, self.pair_light, a, gl, p.n_vertices, p.n_light
+            )
         if positions:  # the positions move next: their samples and image gradients are spent
             self._sampled = None
         return Linearisation(
@@ -572,10 +496,6 @@ class Linearisation:
         self.dn = None if dn is None else dn.tocsr()
         self.jg = self.geometry.jg
 
-    def _lift(self, dX: np.ndarray, dA: np.ndarray) -> np.ndarray:
-        dn = np.zeros_like(dX) if self.dn is None else (self.dn @ dX.ravel()).reshape(-1, 3)
-        return np.concatenate([dX, dn, dA], axis=1)
-
     def _lower(self, yu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``liftᵀ``: (N, k, …) over u to x (N, 3, …) and α (N, N_b, …)."""
         if self.dn is None:
@@ -595,22 +515,48 @@ class Linearisation:
         return c.p.pack(gx, ga, self.light_grad)
 
     def matvec(self, delta: np.ndarray) -> np.ndarray:
-        """JᵀJ δ."""
+        """JᵀJ δ (two compiled passes over the vertices: lift and gram, then back)."""
         c = self.cost
         dX, dA, dL = c.p.unpack(delta)
-        u = self._lift(dX, dA)
-        yu = np.einsum("nij,nj->ni", self.gram, u)
+        dX, dA = np.ascontiguousarray(dX), np.ascontiguousarray(dA)
+        nj, geo = c.normal_jacobian, self.geometry
+        k = self.gram.shape[1]
+        dn_blocks = _NO_BLOCKS if geo.dn is None else geo.dn.data
+        shared = isinstance(self.coupling, np.ndarray)
+        u, yu = gram_products(
+            self.gram,
+            dX,
+            dA,
+            nj.indptr,
+            nj.block_col,
+            dn_blocks,
+            self.coupling if shared else np.empty((0, k, 3)),
+            dL[0],
+        )
         if isinstance(self.coupling, np.ndarray):
-            yu += self.coupling @ dL[0]
             yl = (self.coupling.reshape(-1, 3).T @ u.ravel())[None]
         else:
             yu += (self.coupling @ dL.ravel()).reshape(u.shape)
             yl = (self.coupling.T @ u.ravel()).reshape(-1, 3)
         yl = yl + np.einsum("lab,lb->la", self.light_block, dL)
-        ox, oa = self._lower(yu)
-        if self.jg is not None:
-            ox = ox + (self.jg.T @ (self.jg @ dX.ravel())).reshape(-1, 3)
-        oa = oa + c.gamma[0] * dA @ c.SS + (c.laplacian @ dA) @ c.BB
+        lap = c.laplacian
+        ox, oa = lower_products(
+            yu,
+            dX,
+            dA,
+            nj.transpose_indptr,
+            nj.transpose_block,
+            nj.block_row,
+            nj.block_col,
+            nj.indptr,
+            dn_blocks,
+            _NO_GEOMETRIC if geo.jg_blocks is None else geo.jg_blocks,
+            lap.indptr,
+            lap.indices,
+            lap.data,
+            c.gamma[0] * c.SS,
+            c.BB,
+        )
         return c.p.pack(ox, oa, yl)
 
     def diagonal_blocks(self) -> tuple[np.ndarray, np.ndarray]:

@@ -92,6 +92,11 @@ class NormalJacobian:
         self.block_col = ukey % nv
         self.indptr = np.searchsorted(self.block_row, np.arange(nv + 1))
         self.n_blocks = int(ukey.size)
+        # The transpose's blocks, column by column (a product with ∂n/∂Xᵀ writes each row once).
+        self.transpose_block = np.argsort(self.block_col, kind="stable")
+        self.transpose_indptr = np.searchsorted(
+            self.block_col[self.transpose_block], np.arange(nv + 1)
+        )
 
     def __call__(self, vertices: np.ndarray) -> sp.bsr_array:
         x = np.asarray(vertices, dtype=float)

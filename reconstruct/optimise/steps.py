@@ -464,8 +464,16 @@ def optimise(
         X, A, light = problem.unpack(theta)
         checkpoint.save(
             OptimiseState(
-                stage, done or stage >= last_outer, X, A, light, A0,
-                problem.obs.per_vertex > 0, problem.obs.count, history, seconds,
+                stage,
+                done or stage >= last_outer,
+                X,
+                A,
+                light,
+                A0,
+                problem.obs.per_vertex > 0,
+                problem.obs.count,
+                history,
+                seconds,
             )
         )
 

@@ -1,0 +1,200 @@
+"""Real-size end to end: `rig reconstruct` from RAW to `mesh.ply` on a 40-view × 2-illumination
+sim capture at 800×600, subdivided to ~150k vertices — wall and CPU time per stage, peak RSS,
+accuracy, spectral RMSE and light error against the simulator's truth.
+
+The capture is made once (cached in ``OUT/real_size/session``); every measured run reconstructs
+a fresh copy of its raw frames in a new interpreter, so its time runs from RAW and its peak RSS
+is its own. ``--code DIR`` runs another checkout's `rig reconstruct` on the same capture (the
+same scene and start): the before/after of a change.
+
+    python -m bench.real_size                              # capture (once) + one run
+    python -m bench.real_size --label before --code /path/to/old/checkout
+    python -m bench.real_size --render OUT/real_size/*.json # re-print merged tables
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from bench._common import DEFAULT_OUT, REPO, ResultTable, machine_info, make_console, report
+
+WIDTH, HEIGHT, FOCAL_PX, VIEWS = 800, 600, 1000.0, 40
+TARGET_WALL_S = 600.0
+TARGET_GB = 4.0
+# rig reconstruct's defaults, except that √3 subdivision may reach the issue's ~150k vertices.
+CONFIG: dict[str, Any] = {"subdivide": {"max_faces": 320000}}
+
+
+def capture(session: Path, seed: int) -> None:
+    """The sim capture at real size (rig demo's profile: two illuminations, poses from the
+    board), once."""
+    from rig.capture import run_capture
+    from rig.commands.demo import demo_profile
+
+    if (session / "session.yaml").exists() and (session / "ground_truth").exists():
+        return
+    profile = demo_profile(VIEWS)
+    profile["name"] = "sim-real-size"
+    profile["sim"] = {
+        **profile.get("sim", {}),
+        "camera": {"width": WIDTH, "height": HEIGHT, "focal_px": FOCAL_PX},
+    }
+    session.parent.mkdir(parents=True, exist_ok=True)
+    path = session.parent / "profile.yaml"
+    path.write_text(yaml.safe_dump(profile, sort_keys=False))
+    if session.exists():
+        shutil.rmtree(session)
+    run_capture(path, session, yes=True, seed=seed)
+
+
+def reconstruct(session: Path, run_dir: Path, code: Path) -> dict[str, Any]:
+    """`rig reconstruct` of a fresh copy of ``session`` by the checkout ``code``, measured."""
+    if run_dir.exists():
+        shutil.rmtree(run_dir)
+    copy = run_dir / "session"
+    shutil.copytree(session, copy, ignore=shutil.ignore_patterns("recon"))
+    config = run_dir / "config.yaml"
+    config.write_text(yaml.safe_dump(CONFIG))
+    env = {**os.environ, "PYTHONPATH": str(code)}
+    cmd = [sys.executable, "-m", "rig.cli", "reconstruct", str(copy), "--config", str(config)]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    with open(run_dir / "reconstruct.log", "w", encoding="utf-8") as log:
+        proc = subprocess.run(cmd, cwd=code, env=env, stdout=log, stderr=subprocess.STDOUT)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if proc.returncode != 0:
+        raise RuntimeError(
+            f"rig reconstruct exited {proc.returncode}: see {run_dir}/reconstruct.log"
+        )
+    cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+    recon = copy / "recon"
+    rep = json.loads((recon / "report.json").read_text())
+    stages = json.loads((recon / "timings.json").read_text())
+    return {
+        "wall_s": wall,
+        "cpu_s": cpu,
+        "peak_rss_mb": after.ru_maxrss / 1024,
+        "report": rep,
+        "stages": stages,
+        "recon": str(recon),
+    }
+
+
+def score(session: Path, recon: Path) -> dict[str, Any]:
+    """Accuracy, spectral RMSE and light error against the simulator's truth."""
+    import numpy as np
+
+    from reconstruct.evaluate import evaluate
+
+    truth = session / "ground_truth"
+    rig = yaml.safe_load((truth / "rig.yaml").read_text())
+    offset = rig.get("light_offset_m")
+    ev = evaluate(
+        recon,
+        truth / "mesh.ply",
+        truth / "reflectance.npy",
+        None if offset is None else np.asarray(offset, dtype=float),
+    )
+    return {
+        "accuracy_mm": ev.accuracy_m * 1e3,
+        "completeness_mm": ev.completeness_m * 1e3,
+        "rmse": ev.spectral_rmse,
+        "light_mm": None if ev.light_offset_error_m is None else ev.light_offset_error_m * 1e3,
+    }
+
+
+def tables(runs: list[dict[str, Any]]) -> list[ResultTable]:
+    main = ResultTable(
+        f"rig reconstruct from RAW, sim capture {VIEWS} views × 2 illuminations, "
+        f"{WIDTH}×{HEIGHT} (target ≤ {TARGET_WALL_S / 60:.0f} min wall, ≤ {TARGET_GB:g} GB)",
+        [
+            "run",
+            "vertices",
+            "observations",
+            "wall",
+            "CPU",
+            "peak RSS",
+            "accuracy (mm)",
+            "completeness (mm)",
+            "spectral RMSE",
+            "light error (mm)",
+            "met",
+        ],
+    )
+    stages = ResultTable(
+        "Stages: wall seconds (peak RSS GB); the optimiser's own split after it",
+        ["run", "stages", "optimiser"],
+    )
+    for r in runs:
+        rep, sc = r["report"], r["score"]
+        met = r["wall_s"] <= TARGET_WALL_S and r["peak_rss_mb"] / 1024 <= TARGET_GB
+        main.add(
+            r["label"],
+            rep.get("vertices"),
+            rep.get("observations"),
+            f"{r['wall_s']:.0f} s",
+            f"{r['cpu_s']:.0f} s",
+            f"{r['peak_rss_mb'] / 1024:.2f} GB",
+            sc["accuracy_mm"],
+            sc["completeness_mm"],
+            sc["rmse"],
+            sc["light_mm"],
+            met,
+        )
+        cells = [
+            f"{name} {entry['seconds']:.0f}"
+            + (f" ({entry['peak_rss_mb'] / 1024:.2f})" if entry.get("peak_rss_mb") else "")
+            for name, entry in r["stages"].items()
+            if not entry.get("skipped")
+        ]
+        inner = [f"{k} {v:.0f}" for k, v in rep.get("timings_s", {}).items() if v >= 0.5]
+        stages.add(r["label"], ", ".join(cells), ", ".join(inner))
+    return [main, stages]
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    p.add_argument("--label", default="current")
+    p.add_argument("--code", type=Path, default=REPO, help="checkout whose rig reconstruct runs")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--render", type=Path, nargs="+", help="only re-print these results JSONs")
+    a = p.parse_args(argv)
+    console = make_console()
+    out = a.out / "real_size"
+    if a.render:
+        runs = [r for path in a.render for r in json.loads(path.read_text())["runs"]]
+    else:
+        session = out / "session"
+        console.print(f"capture: {session}")
+        capture(session, a.seed)
+        console.print(f"{a.label}: rig reconstruct ({a.code})")
+        run = reconstruct(session, out / "runs" / a.label, a.code.resolve())
+        run["score"] = score(session, Path(run["recon"]))
+        run["label"] = a.label
+        runs = [run]
+    report(
+        f"real_size_{a.label}" if not a.render else "real_size",
+        out,
+        tables(runs),
+        {"runs": runs},
+        machine_info(),
+        console,
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

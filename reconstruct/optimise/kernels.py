@@ -1,0 +1,309 @@
+"""Compiled per-observation loops of the joint cost: bilinear image samples and the
+Gauss–Newton accumulation of :meth:`~reconstruct.optimise.cost.JointCost.linearise`.
+
+Both walk millions of observations. In NumPy each intermediate quantity was a separate
+(observations × ·) array, written and read back once per pass (at 100k vertices ~2M
+observations, a dozen passes per linearisation); here one loop per vertex reads each
+observation once and keeps its sums in registers, and the vertices run in parallel. The
+observations are sorted by (vertex, view, frame) (``problem.Observations``), so a vertex's
+pairs and a pair's frames are contiguous ranges.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def sample_bilinear(
+    images: np.ndarray,
+    frame: np.ndarray,
+    obs_pair: np.ndarray,
+    index: np.ndarray,
+    frac: np.ndarray,
+    gradient: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Bilinear values (M, C) of ``images`` (F, H, W, C) and with ``gradient`` their
+    ``∂value/∂(u, v)`` (M, C, 2) (else an empty array). Observation m reads frame
+    ``frame[m]`` at the taps of its pair ``obs_pair[m]``: the flat top-left tap ``index`` (P,)
+    and the fractions ``frac`` (P, 2) along columns and rows (``sampling.bilinear_taps``)."""
+    m_count = obs_pair.size
+    width, nc = images.shape[2], images.shape[3]
+    value = np.empty((m_count, nc))
+    grad = np.empty((m_count if gradient else 0, nc, 2))
+    for m in prange(m_count):
+        p = obs_pair[m]
+        r0, c0 = divmod(index[p], width)
+        fc, fr = frac[p, 0], frac[p, 1]
+        f = frame[m]
+        for c in range(nc):
+            i00 = float(images[f, r0, c0, c])
+            i01 = float(images[f, r0, c0 + 1, c])
+            i10 = float(images[f, r0 + 1, c0, c])
+            i11 = float(images[f, r0 + 1, c0 + 1, c])
+            d0 = i01 - i00
+            d1 = i11 - i10
+            top = i00 + fc * d0
+            dv = i10 + fc * d1 - top
+            value[m, c] = top + fr * dv
+            if gradient:
+                grad[m, c, 0] = d0 + fr * (d1 - d0)
+                grad[m, c, 1] = dv
+    return value, grad
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def accumulate_normal_equations(
+    vertex_pairs: np.ndarray,
+    pair_obs: np.ndarray,
+    illumination: np.ndarray,
+    weight: np.ndarray,
+    colour: np.ndarray,
+    residual: np.ndarray,
+    obs_shading: np.ndarray,
+    image_grad: np.ndarray,
+    pair_shading: np.ndarray,
+    g: np.ndarray,
+    h: np.ndarray,
+    proj_jac: np.ndarray,
+    light_grad: np.ndarray,
+    Q: np.ndarray,
+    QtQ: np.ndarray,
+    shared_light: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per-vertex blocks of JᵀJ and Jᵀr over u = [δx, δn, δα] (k = 6 + N_b).
+
+    Per observation o of pair p (vertex i, view c) the rendering Jacobian row block is
+    ``A_o = w (c_o u_pᵀ + V_o)``, ``u_p = [−g, h, 0]``, ``V_o = [−G_o, 0, s Q_k]`` with
+    ``G_o = grad_o duv_p`` (see ``JointCost.linearise``); ``r_o = w e_o``. Inputs: pairs of
+    vertex i are ``vertex_pairs[i]:vertex_pairs[i+1]``, observations of pair p
+    ``pair_obs[p]:pair_obs[p+1]``; ``weight`` w (M,), ``colour`` c (M, 3), ``residual``
+    r = w e (M, 3), ``obs_shading`` s (M,), ``image_grad`` (M, 3, 2) or empty (fixed
+    observations), per pair the shading, g, h (P, 3), ``proj_jac`` (P, 2, 3) and
+    ``light_grad`` g̃ = M_cᵀ g (P, 3); ``Q`` (K, 3, N_b) and ``QtQ`` (K, N_b, N_b).
+
+    Returns gram (N, k, k), grad_u (N, k), a_p = Σ_o A_oᵀ w c_o (P, k), cc_p = Σ_o |w c_o|²
+    (P,), e_p = Σ_o w c_o·r_o (P,) and, for a light shared by all views, the vertex–light
+    coupling Σ_p a_p g̃_pᵀ (N, k, 3) (else empty).
+    """
+    n = vertex_pairs.size - 1
+    n_pairs = pair_obs.size - 1
+    n_ill, _, nb = Q.shape
+    k = 6 + nb
+    images = image_grad.shape[0] > 0
+    gram = np.zeros((n, k, k))
+    grad_u = np.zeros((n, k))
+    a_all = np.zeros((n_pairs, k))
+    cc_all = np.zeros(n_pairs)
+    e_all = np.zeros(n_pairs)
+    coupling = np.zeros((n if shared_light else 0, k, 3))
+    for i in prange(n):
+        group_s2 = np.zeros(n_ill)  # Σ w² s² per illumination
+        group_sr = np.zeros((n_ill, 3))  # Σ w s r per illumination
+        u = np.zeros(6)
+        a = np.zeros(k)
+        e_alpha = np.zeros(nb)
+        pg = np.zeros((2, nb))
+        for p in range(vertex_pairs[i], vertex_pairs[i + 1]):
+            cc = 0.0
+            pe = 0.0
+            e_alpha[:] = 0.0
+            gtg00 = gtg01 = gtg11 = 0.0
+            gc0 = gc1 = gr0 = gr1 = 0.0
+            pg[:] = 0.0
+            for o in range(pair_obs[p], pair_obs[p + 1]):
+                w = weight[o]
+                w2 = w * w
+                ill = illumination[o]
+                c0, c1, c2 = colour[o, 0], colour[o, 1], colour[o, 2]
+                r0, r1, r2 = residual[o, 0], residual[o, 1], residual[o, 2]
+                cc += w2 * (c0 * c0 + c1 * c1 + c2 * c2)
+                pe += w * (c0 * r0 + c1 * r1 + c2 * r2)
+                for b in range(nb):
+                    e_alpha[b] += w2 * (c0 * Q[ill, 0, b] + c1 * Q[ill, 1, b] + c2 * Q[ill, 2, b])
+                s = obs_shading[o]
+                group_s2[ill] += w2 * s * s
+                group_sr[ill, 0] += w * s * r0
+                group_sr[ill, 1] += w * s * r1
+                group_sr[ill, 2] += w * s * r2
+                if images:
+                    x0, x1, x2 = image_grad[o, 0, 0], image_grad[o, 1, 0], image_grad[o, 2, 0]
+                    y0, y1, y2 = image_grad[o, 0, 1], image_grad[o, 1, 1], image_grad[o, 2, 1]
+                    gtg00 += w2 * (x0 * x0 + x1 * x1 + x2 * x2)
+                    gtg01 += w2 * (x0 * y0 + x1 * y1 + x2 * y2)
+                    gtg11 += w2 * (y0 * y0 + y1 * y1 + y2 * y2)
+                    gc0 += w2 * (x0 * c0 + x1 * c1 + x2 * c2)
+                    gc1 += w2 * (y0 * c0 + y1 * c1 + y2 * c2)
+                    gr0 += w * (x0 * r0 + x1 * r1 + x2 * r2)
+                    gr1 += w * (y0 * r0 + y1 * r1 + y2 * r2)
+                    ws = w2 * s
+                    for b in range(nb):
+                        q0, q1, q2 = Q[ill, 0, b], Q[ill, 1, b], Q[ill, 2, b]
+                        pg[0, b] += ws * (x0 * q0 + x1 * q1 + x2 * q2)
+                        pg[1, b] += ws * (y0 * q0 + y1 * q1 + y2 * q2)
+            for d in range(3):
+                u[d] = -g[p, d]
+                u[3 + d] = h[p, d]
+            # a_p = cc u_p + Σ_o w² V_oᵀ c_o
+            for d in range(6):
+                a[d] = cc * u[d]
+            for b in range(nb):
+                a[6 + b] = pair_shading[p] * e_alpha[b]
+            if images:
+                for d in range(3):
+                    a[d] -= proj_jac[p, 0, d] * gc0 + proj_jac[p, 1, d] * gc1
+            # Σ_o A_oᵀA_o = u aᵀ + a uᵀ − cc u uᵀ + Σ_o w² V_oᵀV_o (the last below)
+            for r in range(6):
+                for q in range(k):
+                    gram[i, r, q] += u[r] * a[q]
+                    gram[i, q, r] += a[q] * u[r]
+                for q in range(6):
+                    gram[i, r, q] -= cc * u[r] * u[q]
+                grad_u[i, r] += u[r] * pe
+            if images:
+                # duvᵀ (Σ w² gradᵀgrad) duv, −duvᵀ Σ w gradᵀr, −duvᵀ Σ w² s gradᵀQ
+                for r in range(3):
+                    jr0, jr1 = proj_jac[p, 0, r], proj_jac[p, 1, r]
+                    t0 = gtg00 * jr0 + gtg01 * jr1
+                    t1 = gtg01 * jr0 + gtg11 * jr1
+                    for q in range(3):
+                        gram[i, r, q] += t0 * proj_jac[p, 0, q] + t1 * proj_jac[p, 1, q]
+                    grad_u[i, r] -= jr0 * gr0 + jr1 * gr1
+                    for b in range(nb):
+                        xa = jr0 * pg[0, b] + jr1 * pg[1, b]
+                        gram[i, r, 6 + b] -= xa
+                        gram[i, 6 + b, r] -= xa
+            for q in range(k):
+                a_all[p, q] = a[q]
+            cc_all[p] = cc
+            e_all[p] = pe
+            if shared_light:
+                for q in range(k):
+                    for d in range(3):
+                        coupling[i, q, d] += a[q] * light_grad[p, d]
+        for ill in range(n_ill):
+            for b in range(nb):
+                for q in range(nb):
+                    gram[i, 6 + b, 6 + q] += group_s2[ill] * QtQ[ill, b, q]
+                grad_u[i, 6 + b] += (
+                    group_sr[ill, 0] * Q[ill, 0, b]
+                    + group_sr[ill, 1] * Q[ill, 1, b]
+                    + group_sr[ill, 2] * Q[ill, 2, b]
+                )
+    return gram, grad_u, a_all, cc_all, e_all, coupling
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def gram_products(
+    gram: np.ndarray,
+    dX: np.ndarray,
+    dA: np.ndarray,
+    dn_indptr: np.ndarray,
+    dn_col: np.ndarray,
+    dn_blocks: np.ndarray,
+    coupling: np.ndarray,
+    dL: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """First half of ``Linearisation.matvec``: per vertex the lifted step
+    u = [δx, δn = Σ_j D_ij δx_j, δα] (N, k) and ``gram u (+ C_i δl)`` (N, k). ``dn_*`` is the
+    block-CSR normal Jacobian (empty ``dn_blocks``: positions fixed, δn = 0); ``coupling``
+    (N, k, 3) with the shared light's step ``dL`` (3,), or empty."""
+    n, k = gram.shape[0], gram.shape[1]
+    nb = dA.shape[1]
+    with_normals = dn_blocks.shape[0] > 0
+    shared = coupling.shape[0] > 0
+    u = np.empty((n, k))
+    yu = np.empty((n, k))
+    for i in prange(n):
+        ui = u[i]
+        for d in range(3):
+            ui[d] = dX[i, d]
+            ui[3 + d] = 0.0
+        if with_normals:
+            for b in range(dn_indptr[i], dn_indptr[i + 1]):
+                j = dn_col[b]
+                for r in range(3):
+                    ui[3 + r] += (
+                        dn_blocks[b, r, 0] * dX[j, 0]
+                        + dn_blocks[b, r, 1] * dX[j, 1]
+                        + dn_blocks[b, r, 2] * dX[j, 2]
+                    )
+        for b in range(nb):
+            ui[6 + b] = dA[i, b]
+        for r in range(k):
+            acc = 0.0
+            for q in range(k):
+                acc += gram[i, r, q] * ui[q]
+            if shared:
+                for d in range(3):
+                    acc += coupling[i, r, d] * dL[d]
+            yu[i, r] = acc
+    return u, yu
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def lower_products(
+    yu: np.ndarray,
+    dX: np.ndarray,
+    dA: np.ndarray,
+    dn_t_indptr: np.ndarray,
+    dn_t_block: np.ndarray,
+    dn_row: np.ndarray,
+    dn_col: np.ndarray,
+    dn_indptr: np.ndarray,
+    dn_blocks: np.ndarray,
+    jg_blocks: np.ndarray,
+    lap_indptr: np.ndarray,
+    lap_col: np.ndarray,
+    lap_val: np.ndarray,
+    spectral: np.ndarray,
+    photometric: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Second half of ``Linearisation.matvec``: back from u to [x, α]:
+    ``x_j = yu_j[:3] + Σ_i D_ijᵀ yu_i[3:6] + Σ_i J_g(i, j)ᵀ (J_g δx)_i`` and
+    ``α_j = yu_j[6:] + δα_j S + (L δα)_j Bᵀ B`` (S = γ1 R_sᵀR_s, ``photometric`` = R_bᵀR_b).
+    The transpose runs over column j's blocks ``dn_t_block[dn_t_indptr[j]:…]``, so every vertex
+    writes only its own rows; ``jg_blocks`` (blocks, 3) share the normal Jacobian's sparsity."""
+    n, k = yu.shape
+    nb = dA.shape[1]
+    with_normals = dn_blocks.shape[0] > 0
+    with_geometric = jg_blocks.shape[0] > 0
+    jdx = np.zeros(n)
+    if with_geometric:
+        for i in prange(n):
+            acc = 0.0
+            for b in range(dn_indptr[i], dn_indptr[i + 1]):
+                j = dn_col[b]
+                for d in range(3):
+                    acc += jg_blocks[b, d] * dX[j, d]
+            jdx[i] = acc
+    ox = np.empty((n, 3))
+    oa = np.empty((n, nb))
+    for j in prange(n):
+        for d in range(3):
+            ox[j, d] = yu[j, d]
+        if with_normals:
+            for t in range(dn_t_indptr[j], dn_t_indptr[j + 1]):
+                b = dn_t_block[t]
+                i = dn_row[b]
+                for d in range(3):
+                    ox[j, d] += (
+                        dn_blocks[b, 0, d] * yu[i, 3]
+                        + dn_blocks[b, 1, d] * yu[i, 4]
+                        + dn_blocks[b, 2, d] * yu[i, 5]
+                    )
+                if with_geometric:
+                    for d in range(3):
+                        ox[j, d] += jg_blocks[b, d] * jdx[i]
+        la = np.zeros(nb)
+        for t in range(lap_indptr[j], lap_indptr[j + 1]):
+            m = lap_col[t]
+            for b in range(nb):
+                la[b] += lap_val[t] * dA[m, b]
+        for b in range(nb):
+            acc = yu[j, 6 + b]
+            for q in range(nb):
+                acc += dA[j, q] * spectral[q, b] + la[q] * photometric[q, b]
+            oa[j, b] = acc
+    return ox, oa
