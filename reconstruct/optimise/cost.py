@@ -395,7 +395,8 @@ class JointCost:
         for c, idx in enumerate(self.view_pairs):
             gl[idx] = st.g[idx] @ self.light_maps[c]
         grad, duv = st.image_grad, st.proj_jac
-        images = grad is not None and duv is not None
+        if grad is None or duv is None:  # fixed observations or fixed positions
+            grad, duv = np.empty((0, 3, 2)), np.empty((0, 2, 3))
         shared = p.n_light == 3
         gram, grad_u, a, cc, pair_e, coupling = accumulate_normal_equations(
             self.vertex_pairs,
@@ -405,11 +406,11 @@ class JointCost:
             st.colour,
             wt[:, None] * st.error,
             st.s,
-            grad if images else np.empty((0, 3, 2)),
+            grad,
             st.pair_s,
             st.g,
             st.h,
-            duv if images else np.empty((0, 2, 3)),
+            duv,
             gl,
             self.Q,
             self.QtQ,
