@@ -20,6 +20,7 @@ import logging
 
 import cv2
 import numpy as np
+from numba import njit, prange
 
 from reconstruct.board import BoardSpec, board_texture
 from reconstruct.camera import Intrinsics, Pose
@@ -37,6 +38,19 @@ def _texture(spec: BoardSpec) -> tuple[np.ndarray, tuple[float, float, float, fl
     return image.astype(np.float32), extent
 
 
+@functools.lru_cache(maxsize=2)
+def _supersampled_rays(intrinsics: Intrinsics, supersample: int) -> np.ndarray:
+    """Camera-frame rays through ``supersample``² points per pixel (H·W·ss², 3). A session's
+    views share one camera, and undistorting millions of rays per view was most of the
+    silhouette stage at 800×600."""
+    ss = supersample
+    rr, cc = np.mgrid[0 : intrinsics.height * ss, 0 : intrinsics.width * ss]
+    uv = np.stack([(cc.ravel() + 0.5) / ss, (rr.ravel() + 0.5) / ss], axis=1)
+    rays = intrinsics.pixel_rays(uv)
+    rays.flags.writeable = False
+    return rays
+
+
 def expected_ground(
     spec: BoardSpec, intrinsics: Intrinsics, pose: Pose, supersample: int = 3
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -45,27 +59,67 @@ def expected_ground(
     texture, (x0, y0, x1, y1) = _texture(spec)
     ss = supersample
     h, w = intrinsics.height, intrinsics.width
-    rr, cc = np.mgrid[0 : h * ss, 0 : w * ss]
-    uv = np.stack([(cc.ravel() + 0.5) / ss, (rr.ravel() + 0.5) / ss], axis=1)
-    dirs = intrinsics.pixel_rays(uv) @ pose.R
-    centre = pose.center
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = -centre[2] / dirs[:, 2]
-    xy = centre[:2] + t[:, None] * dirs[:, :2]
-    on = (t > 0) & (xy[:, 0] >= x0) & (xy[:, 0] < x1) & (xy[:, 1] >= y0) & (xy[:, 1] < y1)
-    col = np.clip(((xy[on, 0] - x0) * TEXTURE_PX_PER_M).astype(int), 0, texture.shape[1] - 1)
-    row = np.clip(((y1 - xy[on, 1]) * TEXTURE_PX_PER_M).astype(int), 0, texture.shape[0] - 1)
-    paper = np.zeros(len(uv), np.float32)
-    paper[on] = texture[row, col]
+    paper, cover = _ground_coverage(
+        _supersampled_rays(intrinsics, ss), pose.R, pose.center, texture,
+        np.array([x0, y0, x1, y1]), h, w, ss, TEXTURE_PX_PER_M,
+    )
+    return paper, cover
 
-    def box(values: np.ndarray) -> np.ndarray:
-        return values.reshape(h, ss, w, ss).mean(axis=(1, 3))
 
-    return box(paper), box(on.astype(np.float32))
+@njit(parallel=True, cache=True)
+def _ground_coverage(
+    rays: np.ndarray, R: np.ndarray, centre: np.ndarray, texture: np.ndarray,
+    extent: np.ndarray, h: int, w: int, ss: int, texels_per_m: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Box-filtered paper fraction and sheet coverage per pixel: each camera ray (row-major
+    over the (h·ss, w·ss) supersampled grid) turned to the world (``d @ R``) and met with the
+    board plane z = 0 inside ``extent`` (x0, y0, x1, y1)."""
+    x0, y0, x1, y1 = extent[0], extent[1], extent[2], extent[3]
+    th, tw = texture.shape
+    paper = np.zeros((h, w), np.float32)
+    cover = np.zeros((h, w), np.float32)
+    inv = 1.0 / (ss * ss)
+    for r in prange(h):
+        for c in range(w):
+            p_sum = 0.0
+            n_on = 0
+            for i in range(ss):
+                base = (r * ss + i) * (w * ss) + c * ss
+                for j in range(ss):
+                    ray = rays[base + j]
+                    dx = ray[0] * R[0, 0] + ray[1] * R[1, 0] + ray[2] * R[2, 0]
+                    dy = ray[0] * R[0, 1] + ray[1] * R[1, 1] + ray[2] * R[2, 1]
+                    dz = ray[0] * R[0, 2] + ray[1] * R[1, 2] + ray[2] * R[2, 2]
+                    if dz == 0.0:
+                        continue
+                    t = -centre[2] / dz
+                    if not t > 0.0:
+                        continue
+                    x = centre[0] + t * dx
+                    y = centre[1] + t * dy
+                    if x < x0 or x >= x1 or y < y0 or y >= y1:
+                        continue
+                    col = min(max(int((x - x0) * texels_per_m), 0), tw - 1)
+                    row = min(max(int((y1 - y) * texels_per_m), 0), th - 1)
+                    p_sum += texture[row, col]
+                    n_on += 1
+            paper[r, c] = p_sum * inv
+            cover[r, c] = n_on * inv
+    return paper, cover
 
 
 def _design(u: np.ndarray, v: np.ndarray, degree: int) -> np.ndarray:
     return np.stack([u**i * v**j for i in range(degree + 1) for j in range(degree + 1 - i)], 1)
+
+
+@functools.lru_cache(maxsize=2)
+def _image_design(h: int, w: int, degree: int) -> np.ndarray:
+    """The polynomial design over every pixel of an (h, w) image (evaluated for every frame
+    and channel of every view: built once)."""
+    gv, gu = np.mgrid[0:h, 0:w]
+    full = _design(2 * (gu.ravel() + 0.5) / w - 1, 2 * (gv.ravel() + 0.5) / h - 1, degree)
+    full.flags.writeable = False
+    return full
 
 
 def fit_shading(
@@ -86,14 +140,13 @@ def fit_shading(
     for _ in range(iterations):
         if keep.sum() < design.shape[1] * 4:
             break
-        coef, *_ = np.linalg.lstsq(design[keep], values[keep], rcond=None)
+        kept = design[keep]  # 10 smooth columns on [-1, 1]²: the normal equations are safe
+        coef = np.linalg.solve(kept.T @ kept, kept.T @ values[keep])
         model = design @ coef
         rel = (values - model) / np.maximum(np.abs(model), 1e-9)
         spread = max(1.4826 * float(np.median(np.abs(rel[keep]))), 1e-4)
         keep = np.abs(rel) < max(3.0 * spread, 0.02)
-    gv, gu = np.mgrid[0:h, 0:w]
-    full = _design(2 * (gu.ravel() + 0.5) / w - 1, 2 * (gv.ravel() + 0.5) / h - 1, degree)
-    return (full @ coef).reshape(h, w), spread
+    return (_image_design(h, w, degree) @ coef).reshape(h, w), spread
 
 
 def _blur(image: np.ndarray, sigma: float) -> np.ndarray:
