@@ -111,11 +111,17 @@ def sweep_view(
     shape = ref.shape
     scores = np.full((steps, *shape), -1.0, np.float32)
     t0 = np.where(hit, t_hull, 0.0)
+    # Along a ray x = c + t d, so in a neighbour's camera frame x' = (R c + t_o) + t (R d):
+    # one product per neighbour instead of one per depth step.
+    in_other = {
+        o: (poses[o].to_camera(pose.center[None])[0], dirs @ poses[o].R.T) for o in near
+    }
     for s, off in enumerate(offsets):
-        x = pose.center + (t0 + off)[:, None] * dirs
+        depth_along = (t0 + off)[:, None]
         per_view = []
         for other in near:
-            p = project(intrinsics[other], poses[other], x)
+            origin, direction = in_other[other]
+            p = intrinsics[other].project_camera(origin + depth_along * direction)
             inside = intrinsics[other].in_image(p, 1.0) & hit
             coords = np.stack([p[:, 1] - 0.5, p[:, 0] - 0.5])
             coords = np.nan_to_num(coords, nan=-10.0)
