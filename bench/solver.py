@@ -93,6 +93,11 @@ def worker_optimise(
         "stage_seconds": result.stage_seconds,
         "final_cost": result.history[-1]["terms"]["total"],
         "start_cost": result.history[0]["terms"]["total"],
+        "history": [
+            [h["stage"], h["outer"], h["iteration"], h["terms"]["total"], h["accepted"],
+             h["cg_iterations"]]
+            for h in result.history
+        ],
         "light_error_m": float(np.linalg.norm(result.light[0] - scene.light_offset)),
         "vertex_error_mm_rms": float(np.sqrt(np.mean(dx**2)) * 1e3),
         "vertex_error_mm_median": float(np.median(dx) * 1e3),

@@ -31,6 +31,7 @@ class SolverSettings:
     initial_lambda: float = 1e-3
     cg_tolerance: float = 1e-2  # inner solve relative residual (CG is cheap next to linearising)
     cg_max_iterations: int = 50
+    backtracking_steps: int = 2  # halvings of a rejected step tried before λ grows
     # Keep large freed blocks in the heap during the solve (glibc): −16 % time, +8 % peak RSS
     # at 100k vertices (bench/README.md); False returns every freed block at once.
     keep_freed_memory: bool = True
@@ -263,15 +264,25 @@ def _levenberg_marquardt(
             return project(pre(project(v)))
 
         delta, cg_it = _pcg(op, -g, precondition, cfg.cg_tolerance, cfg.cg_max_iterations)
-        predicted = -(2.0 * float(g @ delta) + float(delta @ lin.matvec(delta)))
-        trial = theta + delta
-        terms = cost.terms(trial, positions)
-        actual = lin.terms["total"] - terms["total"]
-        step = float(np.linalg.norm(delta))
-        accepted = bool(np.isfinite(terms["total"]) and actual > 0 and predicted > 0)
+        gd, dhd = float(g @ delta), float(delta @ lin.matvec(delta))
+        # A step the model over-trusted is first shortened along the same direction (a
+        # `terms` evaluation each) before λ grows and CG solves again: most rejections
+        # came from steps only somewhat too long, and a CG solve costs ~10 evaluations.
+        for shorten in range(cfg.backtracking_steps + 1):
+            fraction = 0.5**shorten
+            predicted = -(2.0 * fraction * gd + fraction**2 * dhd)
+            trial = theta + fraction * delta
+            terms = cost.terms(trial, positions)
+            actual = lin.terms["total"] - terms["total"]
+            accepted = bool(np.isfinite(terms["total"]) and actual > 0 and predicted > 0)
+            if accepted:
+                break
+        step = float(np.linalg.norm(delta)) * (fraction if accepted else 1.0)
         if accepted:
             rho = actual / predicted
-            lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            # a shortened step says the damping was too low: raise it as a rejection would
+            shrink = max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            lam *= shrink if fraction == 1.0 else 1.0 / fraction
             nu = 2.0
             previous = lin.terms["total"]
             theta = trial
