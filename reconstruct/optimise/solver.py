@@ -197,6 +197,7 @@ def levenberg_marquardt(
     settings: SolverSettings | None = None,
     callback: Callback | None = None,
     directions: np.ndarray | None = None,
+    constrain: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> SolveResult:
     """:func:`_levenberg_marquardt` with BLAS held to one thread and freed memory kept.
 
@@ -208,7 +209,9 @@ def levenberg_marquardt(
         keep_freed_memory() if (settings or SolverSettings()).keep_freed_memory else nullcontext()
     )
     with threadpool_limits(limits=1, user_api="blas"), memory:
-        return _levenberg_marquardt(cost, theta, mask, settings, callback, directions)
+        return _levenberg_marquardt(
+            cost, theta, mask, settings, callback, directions, constrain
+        )
 
 
 def _levenberg_marquardt(
@@ -218,12 +221,14 @@ def _levenberg_marquardt(
     settings: SolverSettings | None,
     callback: Callback | None,
     directions: np.ndarray | None,
+    constrain: Callable[[np.ndarray], np.ndarray] | None,
 ) -> SolveResult:
     """Minimise the joint cost over the parameters where ``mask`` is True.
 
     With ``directions`` (N, 3 unit vectors) each vertex moves only along its direction
     (its normal): steps are projected with ``P = n nᵀ`` per vertex and CG runs on that subspace
-    (operator ``P H P``, preconditioner ``P M⁻¹ P``).
+    (operator ``P H P``, preconditioner ``P M⁻¹ P``). ``constrain`` maps a trial θ into the
+    feasible set (the vertices' trust regions); the model's prediction is of the step taken.
     """
     cfg = settings or SolverSettings()
     theta = np.array(theta, dtype=float)
@@ -272,12 +277,17 @@ def _levenberg_marquardt(
             fraction = 0.5**shorten
             predicted = -(2.0 * fraction * gd + fraction**2 * dhd)
             trial = theta + fraction * delta
+            if constrain is not None:
+                trial = constrain(trial)
+                taken = trial - theta
+                if not np.allclose(taken, fraction * delta, rtol=0.0, atol=1e-15):
+                    predicted = -(2.0 * float(g @ taken) + float(taken @ lin.matvec(taken)))
             terms = cost.terms(trial, positions)
             actual = lin.terms["total"] - terms["total"]
             accepted = bool(np.isfinite(terms["total"]) and actual > 0 and predicted > 0)
             if accepted:
                 break
-        step = float(np.linalg.norm(delta)) * (fraction if accepted else 1.0)
+        step = float(np.linalg.norm(trial - theta if accepted else delta))
         if accepted:
             rho = actual / predicted
             # a shortened step says the damping was too low: raise it as a rejection would

@@ -390,6 +390,7 @@ def optimise(
         mask: np.ndarray,
         iterations: int,
         directions: np.ndarray | None = None,
+        constrain: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> np.ndarray:
         t0 = time.perf_counter()
         cost = JointCost(problem, cfg.robust, cfg.robust_scale)
@@ -429,7 +430,7 @@ def optimise(
                 progress(f"{stage} {outer}", rec)
 
         solver = SolverSettings(**{**cfg.solver.__dict__, "max_iterations": iterations})
-        result = levenberg_marquardt(cost, theta, mask, solver, record, directions)
+        result = levenberg_marquardt(cost, theta, mask, solver, record, directions, constrain)
         seconds[stage] = seconds.get(stage, 0.0) + time.perf_counter() - t0
         log.info(
             "%s %d: %s after %d iterations", stage, outer, result.stop_reason, len(result.history)
@@ -524,12 +525,25 @@ def optimise(
         if cfg.position_motion == "normal":
             directions, _ = vertex_normals(X_prev, problem.faces)
         stage = "coarse" if coarse else "joint"
-        theta = run(stage, outer, problem, theta, mask, cfg.joint_iterations, directions)
-        X_new, _, light_new = problem.unpack(theta)
         step_radius = cfg.max_step_edges * problem.weights.scale
         if coarse:  # the blurred cue reaches σ: let the vertices follow it
             step_radius = np.maximum(step_radius, blurs[outer - 1] * pixel_ref)
-        X_new[:] = limit_motion(X_new, X_prev, X0, step_radius, total_radius)
+
+        def within_reach(
+            theta: np.ndarray,
+            problem: Problem = problem,
+            X_prev: np.ndarray = X_prev,
+            step_radius: np.ndarray = step_radius,
+        ) -> np.ndarray:
+            """Trial steps stay in the trust regions, so LM never takes a step the stage end
+            would undo (a weakly held vertex flung 0.1 m, clamped back, broke its ring)."""
+            X, A, light = problem.unpack(theta)
+            return problem.pack(limit_motion(X, X_prev, X0, step_radius, total_radius), A, light)
+
+        theta = run(
+            stage, outer, problem, theta, mask, cfg.joint_iterations, directions, within_reach
+        )
+        X_new, _, light_new = problem.unpack(theta)
         moved = float(np.max(np.linalg.norm(X_new - X_prev, axis=1)))
         light_moved = float(np.max(np.linalg.norm(light_new - light_prev, axis=1)))
         tol = cfg.settle_position * float(np.mean(problem.weights.scale))
