@@ -10,6 +10,7 @@ same scene and start): the before/after of a change.
     python -m bench.real_size                              # capture (once) + one run
     python -m bench.real_size --label before --code /path/to/old/checkout
     python -m bench.real_size --render OUT/real_size/*.json # re-print merged tables
+    python -m bench.real_size --quick                      # smoke size
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import shutil
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -29,26 +31,47 @@ import yaml
 
 from bench._common import DEFAULT_OUT, REPO, ResultTable, machine_info, make_console, report
 
-WIDTH, HEIGHT, FOCAL_PX, VIEWS = 800, 600, 1000.0, 40
 TARGET_WALL_S = 600.0
 TARGET_GB = 4.0
-# rig reconstruct's defaults, except one more √3 step (edges ~1.25 px): the issue's ~150k vertices.
-CONFIG: dict[str, Any] = {"subdivide": {"target_px": 1.25}}
 
 
-def capture(session: Path, seed: int) -> None:
-    """The sim capture at real size (rig demo's profile: two illuminations, poses from the
-    board), once."""
+@dataclass(frozen=True)
+class Size:
+    width: int
+    height: int
+    focal_px: float
+    views: int
+    poses: str  # the profile's `poses:` (estimate: from the board, as a user's session)
+    config: dict[str, Any]
+
+
+SIZES = {
+    # rig reconstruct's defaults, except one more √3 step (edges ~1.25 px): ~150k vertices
+    "full": Size(800, 600, 1000.0, 40, "estimate", {"subdivide": {"target_px": 1.25}}),
+    "quick": Size(
+        320,
+        240,
+        400.0,
+        8,
+        "known",
+        {"optimise": {"outer_iterations": 1, "light_iterations": 3, "joint_iterations": 3}},
+    ),
+}
+
+
+def capture(session: Path, size: Size, seed: int) -> None:
+    """The sim capture (rig demo's profile: two illuminations, poses from the board), once."""
     from rig.capture import run_capture
     from rig.commands.demo import demo_profile
 
     if (session / "session.yaml").exists() and (session / "ground_truth").exists():
         return
-    profile = demo_profile(VIEWS)
+    profile = demo_profile(size.views)
     profile["name"] = "sim-real-size"
+    profile["poses"] = size.poses
     profile["sim"] = {
         **profile.get("sim", {}),
-        "camera": {"width": WIDTH, "height": HEIGHT, "focal_px": FOCAL_PX},
+        "camera": {"width": size.width, "height": size.height, "focal_px": size.focal_px},
     }
     session.parent.mkdir(parents=True, exist_ok=True)
     path = session.parent / "profile.yaml"
@@ -58,14 +81,14 @@ def capture(session: Path, seed: int) -> None:
     run_capture(path, session, yes=True, seed=seed)
 
 
-def reconstruct(session: Path, run_dir: Path, code: Path) -> dict[str, Any]:
+def reconstruct(session: Path, run_dir: Path, code: Path, size: Size) -> dict[str, Any]:
     """`rig reconstruct` of a fresh copy of ``session`` by the checkout ``code``, measured."""
     if run_dir.exists():
         shutil.rmtree(run_dir)
     copy = run_dir / "session"
     shutil.copytree(session, copy, ignore=shutil.ignore_patterns("recon"))
     config = run_dir / "config.yaml"
-    config.write_text(yaml.safe_dump(CONFIG))
+    config.write_text(yaml.safe_dump(size.config))
     env = {**os.environ, "PYTHONPATH": str(code)}
     cmd = [sys.executable, "-m", "rig.cli", "reconstruct", str(copy), "--config", str(config)]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -115,10 +138,11 @@ def score(session: Path, recon: Path) -> dict[str, Any]:
     }
 
 
-def tables(runs: list[dict[str, Any]]) -> list[ResultTable]:
+def tables(runs: list[dict[str, Any]], size: Size) -> list[ResultTable]:
     main = ResultTable(
-        f"rig reconstruct from RAW, sim capture {VIEWS} views × 2 illuminations, "
-        f"{WIDTH}×{HEIGHT} (target ≤ {TARGET_WALL_S / 60:.0f} min wall, ≤ {TARGET_GB:g} GB)",
+        f"rig reconstruct from RAW, sim capture {size.views} views × 2 illuminations, "
+        f"{size.width}×{size.height} (target ≤ {TARGET_WALL_S / 60:.0f} min wall, "
+        f"≤ {TARGET_GB:g} GB)",
         [
             "run",
             "vertices",
@@ -171,28 +195,24 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--code", type=Path, default=REPO, help="checkout whose rig reconstruct runs")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--render", type=Path, nargs="+", help="only re-print these results JSONs")
+    p.add_argument("--quick", action="store_true", help="smoke size (320×240, 8 views)")
     a = p.parse_args(argv)
     console = make_console()
-    out = a.out / "real_size"
+    size = SIZES["quick" if a.quick else "full"]
+    out = a.out if a.quick else a.out / "real_size"
     if a.render:
         runs = [r for path in a.render for r in json.loads(path.read_text())["runs"]]
     else:
         session = out / "session"
         console.print(f"capture: {session}")
-        capture(session, a.seed)
+        capture(session, size, a.seed)
         console.print(f"{a.label}: rig reconstruct ({a.code})")
-        run = reconstruct(session, out / "runs" / a.label, a.code.resolve())
+        run = reconstruct(session, out / "runs" / a.label, a.code.resolve(), size)
         run["score"] = score(session, Path(run["recon"]))
         run["label"] = a.label
         runs = [run]
-    report(
-        f"real_size_{a.label}" if not a.render else "real_size",
-        out,
-        tables(runs),
-        {"runs": runs},
-        machine_info(),
-        console,
-    )
+    name = "real_size" if a.render or a.quick else f"real_size_{a.label}"
+    report(name, out, tables(runs, size), {"runs": runs}, machine_info(), console)
     return 0
 
 

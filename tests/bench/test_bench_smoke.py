@@ -77,3 +77,14 @@ def test_paper_sim_bench(tmp_path: Path) -> None:
     assert blob["oracle"]["rmse_median"] < blob["baseline"]["rmse_median"]
     assert blob["oracle"]["accuracy_m"] < 1e-9 < blob["baseline"]["accuracy_m"]
     assert (tmp_path / "paper_sim_blob_baseline_accuracy_error_map.png").is_file()
+
+
+@pytest.mark.slow
+def test_real_size_bench(tmp_path: Path) -> None:
+    data = run_bench("bench.real_size", tmp_path)
+    (run,) = data["runs"]
+    assert run["report"]["vertices"] > 0 and run["report"]["observations"] > 0
+    assert run["wall_s"] > 0 and run["cpu_s"] > 0 and run["peak_rss_mb"] > 0
+    assert {"decode", "poses", "initial_mesh", "optimise", "export"} <= set(run["stages"])
+    assert 0 < run["score"]["accuracy_mm"] < 20 and 0 < run["score"]["rmse"] < 0.5
+    assert (tmp_path / "runs" / "current" / "session" / "recon" / "mesh.ply").is_file()
