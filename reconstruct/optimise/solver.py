@@ -21,6 +21,9 @@ import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
 from reconstruct.optimise.cost import JointCost, Linearisation
+from reconstruct.optimise.multilevel import CoarseOperator, patch_bumps
+
+PRECONDITIONERS = ("block", "two_level")
 
 
 @dataclass
@@ -31,6 +34,10 @@ class SolverSettings:
     initial_lambda: float = 1e-3
     cg_tolerance: float = 1e-2  # inner solve relative residual (CG is cheap next to linearising)
     cg_max_iterations: int = 50
+    # "block": the per-vertex block preconditioner; "two_level": plus a coarse correction by
+    # patches of vertices moving together (multilevel.py), seeds `coarse_hops` edges apart.
+    preconditioner: str = "block"
+    coarse_hops: int = 4
     # Keep large freed blocks in the heap during the solve (glibc): −16 % time, +8 % peak RSS
     # at 100k vertices (bench/README.md); False returns every freed block at once.
     keep_freed_memory: bool = True
@@ -129,14 +136,16 @@ class ArrowheadPreconditioner:
         p = self.p
         n, nb = p.n_vertices, p.n_basis
         sx, sa, sl = p.slices()
-        u = np.concatenate([v[sx].reshape(n, 3), v[sa].reshape(n, nb)], axis=1)
-        u = np.einsum("nji,nj->ni", self.basis, u)
-        k = u.shape[1]
+        shapes = self.basis[:, :3, : -nb or None]  # x = shapes · (x or h); α stays α
+        m = shapes.shape[2]
+        u = np.concatenate(
+            [np.einsum("nam,na->nm", shapes, v[sx].reshape(n, 3)), v[sa].reshape(n, nb)], axis=1
+        )
         zu = np.einsum("nij,nj->ni", self.vert, u).ravel()
         zl = self.schur_inv @ (v[sl] - self.coupling.T @ zu)
-        zu = (zu - self.dinv_c @ zl).reshape(n, k)
-        z = np.einsum("nij,nj->ni", self.basis, zu)
-        return p.pack(z[:, :3], z[:, 3:], zl) * self.mask
+        zu = (zu - self.dinv_c @ zl).reshape(n, m + nb)
+        zx = np.einsum("nam,nm->na", shapes, zu[:, :m])
+        return p.pack(zx, zu[:, m:], zl) * self.mask
 
 
 def _diag(values: np.ndarray) -> np.ndarray:
@@ -248,9 +257,13 @@ def _levenberg_marquardt(
 
     With ``directions`` (N, 3 unit vectors) each vertex moves only along its direction
     (its normal): steps are projected with ``P = n nᵀ`` per vertex and CG runs on that subspace
-    (operator ``P H P``, preconditioner ``P M⁻¹ P``).
+    (operator ``P H P``; the block preconditioner inverts the projected blocks). With
+    ``preconditioner: two_level`` a coarse correction by patches (:mod:`multilevel`) wraps the
+    block one; its ``A R`` is built once per linearisation.
     """
     cfg = settings or SolverSettings()
+    if cfg.preconditioner not in PRECONDITIONERS:
+        raise ValueError(f"preconditioner {cfg.preconditioner!r}: use one of {PRECONDITIONERS}")
     theta = np.array(theta, dtype=float)
     sx = cost.p.slices()[0]
 
@@ -262,6 +275,11 @@ def _levenberg_marquardt(
         return out
 
     positions = bool(mask[sx].any())  # else the position derivatives are left out
+    bumps = None
+    if cfg.preconditioner == "two_level" and positions:
+        free = np.any(mask[sx].reshape(-1, 3), axis=1)
+        bumps = patch_bumps(cost.p.faces, theta[sx].reshape(-1, 3), free, cfg.coarse_hops)
+    coarse: CoarseOperator | None = None
     lin = cost.linearise(theta, positions)
     blocks = lin.diagonal_blocks()
     lam, nu = cfg.initial_lambda, 2.0
@@ -285,9 +303,14 @@ def _levenberg_marquardt(
             pv = project(v)
             return project(lin.matvec(pv) + lam * scale * pv)
 
-        def precondition(v: np.ndarray, pre: ArrowheadPreconditioner = pre) -> np.ndarray:
+        def block(v: np.ndarray, pre: ArrowheadPreconditioner = pre) -> np.ndarray:
             return project(pre(project(v)))
 
+        precondition: Callable[[np.ndarray], np.ndarray] = block
+        if bumps is not None:
+            if coarse is None or coarse.lin is not lin:  # A R once per linearisation
+                coarse = CoarseOperator(lin, bumps, mask, scale, directions)
+            precondition = coarse.preconditioner(lam, block)
         delta, cg_it = _pcg(op, -g, precondition, cfg.cg_tolerance, cfg.cg_max_iterations)
         predicted = -(2.0 * float(g @ delta) + float(delta @ lin.matvec(delta)))
         trial = theta + delta
