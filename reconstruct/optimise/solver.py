@@ -21,6 +21,9 @@ import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
 from reconstruct.optimise.cost import JointCost, Linearisation
+from reconstruct.optimise.multilevel import CoarseOperator, patch_bumps
+
+PRECONDITIONERS = ("block", "two_level")
 
 
 @dataclass
@@ -32,6 +35,10 @@ class SolverSettings:
     cg_tolerance: float = 1e-2  # inner solve relative residual (CG is cheap next to linearising)
     cg_max_iterations: int = 50
     backtracking_steps: int = 2  # halvings of a rejected step tried before λ grows
+    # "block": the per-vertex block preconditioner; "two_level": plus a coarse correction by
+    # patches of vertices moving together (multilevel.py), seeds `coarse_hops` edges apart.
+    preconditioner: str = "block"
+    coarse_hops: int = 4
     # Keep large freed blocks in the heap during the solve (glibc): −16 % time, +8 % peak RSS
     # at 100k vertices (bench/README.md); False returns every freed block at once.
     keep_freed_memory: bool = True
@@ -63,7 +70,12 @@ class ArrowheadPreconditioner:
     """Exact inverse of the block diagonal of ``JᵀJ + λD`` (per vertex [x, α], per light 3×3)
     bordered by the vertex–light coupling: every vertex sees the shared light, which a plain
     block-Jacobi misses (the slow mode is the light distance against the reflectance scale).
-    The light is eliminated by its small dense Schur complement."""
+    The light is eliminated by its small dense Schur complement.
+
+    With ``directions`` the vertex blocks are those of the projected system, over [h, α] with
+    x = h d: the projection of the 3-D block's inverse is not the inverse of the projected
+    block, and where a vertex's x-block is anisotropic off its normal the two differ by large
+    factors (CG then needed 10 iterations even where λD dominates)."""
 
     def __init__(
         self,
@@ -72,6 +84,7 @@ class ArrowheadPreconditioner:
         lam: float,
         scale: np.ndarray,
         mask: np.ndarray,
+        directions: np.ndarray | None = None,
     ):
         p = lin.cost.p
         self.p = p
@@ -79,11 +92,16 @@ class ArrowheadPreconditioner:
         vert, light = blocks
         n, nb = p.n_vertices, p.n_basis
         sx, sa, sl = p.slices()
+        # Per vertex the map from the block's unknowns [x or h, α] to [x, α], masked.
+        m = 3 if directions is None else 1
+        basis = np.zeros((n, 3 + nb, m + nb))
+        basis[:, :3, :m] = np.eye(3)[None] if directions is None else directions[:, :, None]
+        basis[:, :3] *= mask[sx].reshape(n, 3, 1)
+        basis[:, 3:, m:] = np.eye(nb) * mask[sa].reshape(n, nb, 1)
+        self.basis = basis
         dv = np.concatenate([scale[sx].reshape(n, 3), scale[sa].reshape(n, nb)], axis=1)
-        mv = np.concatenate([mask[sx].reshape(n, 3), mask[sa].reshape(n, nb)], axis=1)
-        vert = vert * (mv[:, :, None] & mv[:, None, :])
-        idx = np.arange(3 + nb)
-        vert[:, idx, idx] += lam * dv + ~mv
+        live = np.abs(basis).sum(axis=1) > 0
+        vert = basis.transpose(0, 2, 1) @ ((vert + _diag(lam * dv)) @ basis) + _diag(~live)
         self.vert = np.linalg.inv(vert)
         ml = mask[sl]
         dense = np.zeros((p.n_light, p.n_light))
@@ -92,17 +110,21 @@ class ArrowheadPreconditioner:
         dense *= ml[:, None] & ml[None, :]
         dense[np.arange(p.n_light), np.arange(p.n_light)] += lam * scale[sl] + ~ml
         coupling = lin.light_coupling()
-        k = 3 + nb
+        k = m + nb
         if isinstance(coupling, np.ndarray):  # shared offset: dense (N, k, 3)
-            coupling = coupling * mv[:, :, None] * ml[None, None, :]
+            coupling = basis.transpose(0, 2, 1) @ coupling * ml[None, None, :]
             self.coupling: np.ndarray | sp.csr_array = coupling.reshape(n * k, 3)
             self.dinv_c: np.ndarray | sp.csr_array = np.einsum(
                 "nij,njl->nil", self.vert, coupling
             ).reshape(n * k, 3)
             schur = dense - self.coupling.T @ self.dinv_c
         else:
-            coupling = sp.diags_array(mv.ravel().astype(float)) @ coupling
-            coupling = coupling @ sp.diags_array(ml.astype(float))
+            reduce = sp.bsr_array(
+                (basis.transpose(0, 2, 1), np.arange(n), np.arange(n + 1)),
+                shape=(n * k, n * (3 + nb)),
+                blocksize=(k, 3 + nb),
+            )
+            coupling = reduce @ coupling @ sp.diags_array(ml.astype(float))
             self.coupling = coupling.tocsr()
             dinv = sp.bsr_array(
                 (self.vert, np.arange(n), np.arange(n + 1)), shape=(n * k, n * k), blocksize=(k, k)
@@ -115,11 +137,24 @@ class ArrowheadPreconditioner:
         p = self.p
         n, nb = p.n_vertices, p.n_basis
         sx, sa, sl = p.slices()
-        u = np.concatenate([v[sx].reshape(n, 3), v[sa].reshape(n, nb)], axis=1).ravel()
-        zu = np.einsum("nij,nj->ni", self.vert, u.reshape(n, 3 + nb)).ravel()
+        shapes = self.basis[:, :3, : -nb or None]  # x = shapes · (x or h); α stays α
+        m = shapes.shape[2]
+        u = np.concatenate(
+            [np.einsum("nam,na->nm", shapes, v[sx].reshape(n, 3)), v[sa].reshape(n, nb)], axis=1
+        )
+        zu = np.einsum("nij,nj->ni", self.vert, u).ravel()
         zl = self.schur_inv @ (v[sl] - self.coupling.T @ zu)
-        zu = (zu - self.dinv_c @ zl).reshape(n, 3 + nb)
-        return p.pack(zu[:, :3], zu[:, 3:], zl) * self.mask
+        zu = (zu - self.dinv_c @ zl).reshape(n, m + nb)
+        zx = np.einsum("nam,nm->na", shapes, zu[:, :m])
+        return p.pack(zx, zu[:, m:], zl) * self.mask
+
+
+def _diag(values: np.ndarray) -> np.ndarray:
+    """Diagonal matrices (N, k, k) from their diagonals (N, k)."""
+    out = np.zeros((*values.shape, values.shape[-1]))
+    idx = np.arange(values.shape[-1])
+    out[:, idx, idx] = values
+    return out
 
 
 def _pcg(
@@ -227,10 +262,14 @@ def _levenberg_marquardt(
 
     With ``directions`` (N, 3 unit vectors) each vertex moves only along its direction
     (its normal): steps are projected with ``P = n nᵀ`` per vertex and CG runs on that subspace
-    (operator ``P H P``, preconditioner ``P M⁻¹ P``). ``constrain`` maps a trial θ into the
-    feasible set (the vertices' trust regions); the model's prediction is of the step taken.
+    (operator ``P H P``; the block preconditioner inverts the projected blocks). With
+    ``preconditioner: two_level`` a coarse correction by patches (:mod:`multilevel`) wraps the
+    block one; its ``A R`` is built once per linearisation. ``constrain`` maps a trial θ into
+    the feasible set (the vertices' trust regions); the model's prediction is of the step taken.
     """
     cfg = settings or SolverSettings()
+    if cfg.preconditioner not in PRECONDITIONERS:
+        raise ValueError(f"preconditioner {cfg.preconditioner!r}: use one of {PRECONDITIONERS}")
     theta = np.array(theta, dtype=float)
     sx = cost.p.slices()[0]
 
@@ -242,6 +281,11 @@ def _levenberg_marquardt(
         return out
 
     positions = bool(mask[sx].any())  # else the position derivatives are left out
+    bumps = None
+    if cfg.preconditioner == "two_level" and positions:
+        free = np.any(mask[sx].reshape(-1, 3), axis=1)
+        bumps = patch_bumps(cost.p.faces, theta[sx].reshape(-1, 3), free, cfg.coarse_hops)
+    coarse: CoarseOperator | None = None
     lin = cost.linearise(theta, positions)
     blocks = lin.diagonal_blocks()
     lam, nu = cfg.initial_lambda, 2.0
@@ -257,7 +301,7 @@ def _levenberg_marquardt(
         if not np.any(g):
             reason = "zero gradient"
             break
-        pre = ArrowheadPreconditioner(lin, blocks, lam, scale, mask)
+        pre = ArrowheadPreconditioner(lin, blocks, lam, scale, mask, directions)
 
         def op(
             v: np.ndarray, lin: Linearisation = lin, lam: float = lam, scale: np.ndarray = scale
@@ -265,9 +309,14 @@ def _levenberg_marquardt(
             pv = project(v)
             return project(lin.matvec(pv) + lam * scale * pv)
 
-        def precondition(v: np.ndarray, pre: ArrowheadPreconditioner = pre) -> np.ndarray:
+        def block(v: np.ndarray, pre: ArrowheadPreconditioner = pre) -> np.ndarray:
             return project(pre(project(v)))
 
+        precondition: Callable[[np.ndarray], np.ndarray] = block
+        if bumps is not None:
+            if coarse is None or coarse.lin is not lin:  # A R once per linearisation
+                coarse = CoarseOperator(lin, bumps, mask, scale, directions)
+            precondition = coarse.preconditioner(lam, block)
         delta, cg_it = _pcg(op, -g, precondition, cfg.cg_tolerance, cfg.cg_max_iterations)
         gd, dhd = float(g @ delta), float(delta @ lin.matvec(delta))
         # A step the model over-trusted is first shortened along the same direction (a

@@ -24,7 +24,12 @@ from reconstruct.optimise.cost import JointCost, Robust
 from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
 from reconstruct.optimise.problem import Frames, LightMode, Observations, Problem, Rig, Weights
 from reconstruct.optimise.sampling import bilinear, blur_frames, taps_valid
-from reconstruct.optimise.solver import IterationRecord, SolverSettings, levenberg_marquardt
+from reconstruct.optimise.solver import (
+    PRECONDITIONERS,
+    IterationRecord,
+    SolverSettings,
+    levenberg_marquardt,
+)
 from reconstruct.optimise.uncertainty import (
     VertexUncertainty,
     reflectance_prior,
@@ -133,9 +138,14 @@ class OptimiseSettings:
                 f"{where}: gamma is {gamma!r}, not three non-negative numbers", "e.g. [3, 2, 0.01]"
             )
         check_types(conf, cls(), where, low=0.0, lows={"min_view_cos": -1.0})
-        check_types(solver, SolverSettings(), f"{where} solver", low=0.0)
+        check_types(solver, SolverSettings(), f"{where} solver", low=0.0, lows={"coarse_hops": 1})
         out = cls(**conf, solver=SolverSettings(**solver))
         out.gamma = tuple(float(g) for g in gamma)  # type: ignore[assignment]
+        if out.solver.preconditioner not in PRECONDITIONERS:
+            raise RigError(
+                f"{where}: solver preconditioner {out.solver.preconditioner!r} is unknown",
+                f"use {' or '.join(PRECONDITIONERS)}",
+            )
         if out.position_motion not in ("normal", "free"):
             raise RigError(
                 f"{where}: position_motion {out.position_motion!r} is unknown", "use normal or free"

@@ -6,9 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from scipy.sparse.linalg import spsolve
 
 from reconstruct.forward import render_values, response_matrix, shading
 from reconstruct.optimise.cost import JointCost
+from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.solver import ArrowheadPreconditioner
 from reconstruct.optimise.synthetic import SyntheticScene
 from tests.optimise.conftest import cost_at, problem_at
@@ -133,10 +135,12 @@ def sl_index(cost: JointCost, j: int) -> np.ndarray:
     return np.arange(sl.start + 3 * j, sl.start + 3 * j + 3)
 
 
+@pytest.mark.parametrize("normal", [False, True])
 @pytest.mark.parametrize("mode", ["offset", "free"])
 def test_preconditioner_inverts_the_bordered_block_diagonal(
-    scene: SyntheticScene, mode: str
+    scene: SyntheticScene, mode: str, normal: bool
 ) -> None:
+    """With directions it inverts the blocks of the projected system (x = h d per vertex)."""
     cost, theta = cost_at(scene, False, mode)
     lin = cost.linearise(theta)
     blocks = lin.diagonal_blocks()
@@ -144,29 +148,35 @@ def test_preconditioner_inverts_the_bordered_block_diagonal(
     mask = p.mask(True, True, True)
     scale = np.ones(p.size)
     lam = 0.1
-    pre = ArrowheadPreconditioner(lin, blocks, lam, scale, mask)
-    # Dense version of the approximated matrix: vertex blocks, light blocks, coupling.
+    directions = vertex_normals(scene.vertices, scene.faces)[0] if normal else None
+    pre = ArrowheadPreconditioner(lin, blocks, lam, scale, mask, directions)
+    # The approximated matrix in θ's layout: vertex blocks, light blocks, coupling.
     n, nb = p.n_vertices, p.n_basis
     k = 3 + nb
     order = np.concatenate(
         [np.r_[3 * i : 3 * i + 3, 3 * n + nb * i : 3 * n + nb * (i + 1)] for i in range(n)]
         + [np.arange(p.slices()[2].start, p.size)]
-    )
-    M = np.zeros((p.size, p.size))
+    )  # vertex-interleaved position of each θ entry
     vert, light = blocks
-    for i in range(n):
-        M[k * i : k * i + k, k * i : k * i + k] = vert[i] + lam * np.eye(k)
-    nl = p.n_light
-    for j in range(nl // 3):
-        M[n * k + 3 * j : n * k + 3 * j + 3, n * k + 3 * j : n * k + 3 * j + 3] = light[j]
-    M[n * k :, n * k :] += lam * np.eye(nl)
     coupling = lin.light_coupling()
     C = coupling.reshape(n * k, 3) if isinstance(coupling, np.ndarray) else coupling.toarray()
-    M[: n * k, n * k :] = C
-    M[n * k :, : n * k] = C.T
+    light_dense = sp.block_diag(list(light)).toarray() + lam * np.eye(p.n_light)
+    M = sp.block_array(
+        [
+            [sp.block_diag(list(vert + lam * np.eye(k))), sp.csr_array(C)],
+            [sp.csr_array(C.T), sp.csr_array(light_dense)],
+        ]
+    ).tocsr()
+    M = M[np.argsort(order)][:, np.argsort(order)]  # back to θ's layout
+    # Allowed motion: per vertex its direction (or the axes), α and light.
+    U = sp.eye_array(p.size, format="csr")
+    if directions is not None:
+        rows = 3 * np.arange(n)[:, None] + np.arange(3)
+        x = sp.csr_array((directions.ravel(), (rows.ravel(), np.repeat(np.arange(n), 3))))
+        U = sp.block_diag([x, sp.eye_array(p.size - 3 * n)]).tocsr()
     v = np.random.default_rng(6).normal(size=p.size)
-    z = pre(v)
-    assert np.allclose(M @ z[order], v[order], rtol=1e-8, atol=1e-8 * np.abs(v).max())
+    expected = U @ spsolve((U.T @ M @ U).tocsc(), U.T @ v)
+    assert np.allclose(pre(v), expected, rtol=1e-8, atol=1e-8 * np.abs(expected).max())
 
 
 @pytest.mark.parametrize("images", [False, True])
