@@ -345,6 +345,9 @@ def _levenberg_marquardt(
             nu = 2.0
             previous = lin.terms["total"]
             theta = trial
+            # the old system's blocks go before the new ones are built
+            del lin, pre, op, block, precondition
+            coarse = None
             lin = cost.linearise(theta, positions)
             blocks = lin.diagonal_blocks()
         else:
