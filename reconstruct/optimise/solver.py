@@ -341,7 +341,7 @@ def _levenberg_marquardt(
             rho = actual / predicted
             # a shortened step says the damping was too low: raise it as a rejection would
             shrink = max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-            lam *= shrink if fraction == 1.0 else 1.0 / fraction
+            lam *= shrink if fraction == 1.0 else 1.0
             nu = 2.0
             previous = lin.terms["total"]
             theta = trial
@@ -359,7 +359,8 @@ def _levenberg_marquardt(
         history.append(record)
         if callback:
             callback(record)
-        if accepted and actual <= cfg.function_tolerance * previous:
+        # (a shortened step's small gain says the full step was too long, not convergence)
+        if accepted and fraction == 1.0 and actual <= cfg.function_tolerance * previous:
             reason = "cost change below tolerance"
             break
         if step <= cfg.step_tolerance * (np.linalg.norm(theta * mask) + cfg.step_tolerance):
