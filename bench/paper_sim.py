@@ -2,9 +2,9 @@
 
 Per scene (detailed ``blob`` and ``torus``, painted with the 24 ColorChecker reflectances): a sim
 capture of ≥ 40 camera–light positions × 2 illuminations (LED1, LED2) with known poses (the paper
-gives OpenMVS the true poses), an initial mesh of MVS quality (the true shape re-sampled with
-point noise and a smooth wave, re-meshed by Poisson — smoothed and decimated; or the pipeline's
-CPU dense path), then
+gives OpenMVS the true poses), the initial mesh of the pipeline's own CPU dense path
+(PatchMatch + Poisson; ``--initial degraded`` is an ablation: the true shape re-sampled with
+point noise and a smooth wave, re-meshed by Poisson), then
 
 * (a) baseline "MVS + per-pixel estimation": 2-D reflectance per pixel of every image (the
   calibration module's estimator, shading taken as a flat white reference facing the light at the
@@ -410,8 +410,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--height", type=int, default=480)
     parser.add_argument("--subdivisions", type=int, default=7, help="sim scene detail")
     parser.add_argument(
-        "--initial", choices=("degraded", "dense"), default="degraded",
-        help="initial mesh: the true shape re-sampled and Poisson-meshed, or the CPU dense path",
+        "--initial", choices=("dense", "degraded"), default="dense",
+        help="initial mesh: the pipeline's own CPU dense path (default), or, as an ablation, "
+        "the true shape re-sampled and Poisson-meshed",
     )  # fmt: skip
     parser.add_argument(
         "--distances", default="0.35,0.5,0.65",

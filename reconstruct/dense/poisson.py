@@ -43,6 +43,11 @@ def poisson_mesh(
     points: np.ndarray, normals: np.ndarray, depth: int, trim: float, num_threads: int = -1
 ) -> trimesh.Trimesh:
     """Screened Poisson surface of oriented points; the largest connected piece is kept."""
+    if len(points) < 4:  # pycolmap's trimmer dies on an empty octree instead of raising
+        raise RigError(
+            f"Poisson meshing was given {len(points)} points",
+            "check the dense point cloud (masks, texture) or give --initial-mesh",
+        )
     with tempfile.TemporaryDirectory() as tmp:
         src, dst = Path(tmp) / "points.ply", Path(tmp) / "mesh.ply"
         write_oriented_ply(src, points, normals)

@@ -23,7 +23,10 @@ def scene_box(
     intrinsics: dict[int, Intrinsics], poses: dict[int, Pose], points: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """An axis-aligned box around the object: sparse points when there are enough, else a
-    cube at the point closest to all optical axes, as wide as the narrowest view there."""
+    cube at the point closest to all optical axes, as wide as the widest view there (the
+    carve removes what no silhouette holds; a cube as narrow as the closest view cut off
+    the parts of an object that overfill it: 10 mm mean error on the external spot scene
+    with views stepping to 0.7x the distance)."""
     if points is not None and len(points) >= 50:
         lo, hi = np.percentile(points, 2, axis=0), np.percentile(points, 98, axis=0)
         pad = 0.25 * (hi - lo).max()
@@ -35,7 +38,7 @@ def scene_box(
     target = np.linalg.solve(proj.sum(0), np.einsum("nij,nj->i", proj, centres))
     dist = np.linalg.norm(centres - target, axis=1)
     fov = [min(i.width / i.K[0, 0], i.height / i.K[1, 1]) for i in (intrinsics[v] for v in poses)]
-    half = 0.5 * float(np.min(np.asarray(fov) * dist))
+    half = 0.5 * float(np.max(np.asarray(fov) * dist))
     return target - half, target + half
 
 
@@ -63,21 +66,33 @@ def carve(
     shape = np.maximum(np.ceil((hi - lo) / size).astype(int), 1)
     axes = [lo[k] + size * (np.arange(shape[k]) + 0.5) for k in range(3)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    outside = np.zeros(len(grid), np.int32)
-    seen = np.zeros(len(grid), np.int32)
-    for view, mask in masks.items():
-        uv = project(intrinsics[view], poses[view], grid)
-        ok = intrinsics[view].in_image(uv)
-        col = np.clip(np.floor(uv[ok, 0]).astype(int), 0, mask.shape[1] - 1)
-        row = np.clip(np.floor(uv[ok, 1]).astype(int), 0, mask.shape[0] - 1)
-        hit = np.zeros(len(grid), bool)
-        hit[np.flatnonzero(ok)] = mask[row, col]
-        outside += ok & ~hit
-        seen += ok
+    outside, seen = silhouette_votes(grid, masks, intrinsics, poses)
     occupied = (outside < votes) & (seen >= min_views)
     if floor is not None:
         occupied &= grid[:, 2] > floor
     return occupied.reshape(shape), lo + 0.5 * size, size
+
+
+def silhouette_votes(
+    points: np.ndarray,
+    masks: dict[int, np.ndarray],
+    intrinsics: dict[int, Intrinsics],
+    poses: dict[int, Pose],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per point: how many views put it outside their silhouette, and how many see it (its
+    projection inside the image)."""
+    outside = np.zeros(len(points), np.int32)
+    seen = np.zeros(len(points), np.int32)
+    for view, mask in masks.items():
+        uv = project(intrinsics[view], poses[view], points)
+        ok = intrinsics[view].in_image(uv)
+        col = np.clip(np.floor(uv[ok, 0]).astype(int), 0, mask.shape[1] - 1)
+        row = np.clip(np.floor(uv[ok, 1]).astype(int), 0, mask.shape[0] - 1)
+        hit = np.zeros(len(points), bool)
+        hit[np.flatnonzero(ok)] = mask[row, col]
+        outside += ok & ~hit
+        seen += ok
+    return outside, seen
 
 
 def surface_points(

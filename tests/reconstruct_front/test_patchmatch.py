@@ -10,12 +10,16 @@ from scipy.ndimage import map_coordinates
 from reconstruct.camera import Intrinsics, Pose
 from reconstruct.dense.patchmatch import (
     PatchMatchConfig,
+    ViewDepth,
+    fuse,
     patchmatch_points,
     patchmatch_view,
     scaled,
     source_views,
     undistorted,
+    window_offsets,
 )
+from reconstruct.dense.plane_cost import texture_map
 from reconstruct.raycast import RayCaster
 
 WIDTH, HEIGHT, FOCAL = 200, 150, 400.0
@@ -85,10 +89,12 @@ def test_fused_points_lie_on_the_plane(plane_scene: dict) -> None:
     s = plane_scene
     conf = PatchMatchConfig(scale=0.5, iterations=4, sources=4, top_k=2, min_consistent=2)
     intrinsics = dict.fromkeys(s["poses"], s["intr"])
-    points, normals, stats = patchmatch_points(
+    dense = patchmatch_points(
         s["hull"].vertices, s["hull"].faces, s["images"], s["masks"], intrinsics, s["poses"], conf
     )
-    assert stats["patchmatch_points"] == len(points) > 1000
+    points, normals = dense.points, dense.normals
+    assert dense.stats["patchmatch_points"] == len(points) > 1000
+    assert set(dense.maps) == set(s["poses"])
     assert np.percentile(np.abs(points[:, 2]), 90) < 0.5 / (FOCAL * 0.5)
     assert np.median(normals[:, 2]) > 0.99
 
@@ -116,3 +122,36 @@ def test_undistorted_images_follow_the_pinhole_projection() -> None:
     seen = map_coordinates(flat[..., 0], [p_u[:, 1] - 0.5, p_u[:, 0] - 0.5], order=1)
     np.testing.assert_allclose(seen, original, atol=0.02)
     assert mask[120, 160]
+
+
+def test_shading_ramps_are_not_texture() -> None:
+    """The lamp rides on the camera, so smooth shading changes slope from view to view; a
+    window holding only a ramp of intensity has no texture to match, a painted edge has."""
+    rows, cols = np.mgrid[0:40, 0:40].astype(float)
+    ramp = 0.3 + 0.01 * cols + 0.004 * rows
+    edge = ramp + 0.2 * (cols > 20)
+    image = np.stack([ramp, edge], axis=-1)
+    dr, dc = window_offsets(PatchMatchConfig())
+    texture = texture_map(image, np.ones((40, 40), bool), dr, dc)
+    assert texture[10, 10] < 1e-6 < PatchMatchConfig().min_texture < texture[10, 20]
+    flat = np.stack([ramp, ramp], axis=-1)
+    assert texture_map(flat, np.ones((40, 40), bool), dr, dc)[20, 20] < 1e-6
+
+
+def test_fusion_averages_the_views_that_confirm_a_point(plane_scene: dict) -> None:
+    """Two views read the plane z = 0; view 1 reads it 2 mm too far along its rays. Each
+    fused point is the mean of both readings, so every point lies between the two."""
+    intr, poses = plane_scene["intr"], {v: plane_scene["poses"][v] for v in (0, 1)}
+    rr, cc = np.mgrid[0:HEIGHT, 0:WIDTH]
+    pixels = np.stack([cc.ravel() + 0.5, rr.ravel() + 0.5], 1)
+    maps = {}
+    for v, bias in ((0, 0.0), (1, 0.002)):
+        rays = intr.pixel_rays(pixels) @ poses[v].R
+        distance = (-poses[v].center[2] / rays[:, 2] + bias).reshape(HEIGHT, WIDTH)
+        normal = np.broadcast_to(poses[v].R @ np.array([0.0, 0.0, 1.0]), (HEIGHT, WIDTH, 3))
+        maps[v] = ViewDepth(distance, np.array(normal), np.zeros((HEIGHT, WIDTH)), intr)
+    points, normals, stats = fuse(maps, poses, {0: [1], 1: [0]}, PatchMatchConfig(min_consistent=1))
+    assert stats["patchmatch_points"] > 0.3 * WIDTH * HEIGHT
+    below = -points[:, 2]  # view 1's reading lies 2 mm * sin(elevation) below the plane
+    assert np.percentile(below, 5) > 0.0006 and np.percentile(below, 95) < 0.0011
+    assert np.median(normals[:, 2]) > 0.999

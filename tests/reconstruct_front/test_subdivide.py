@@ -7,7 +7,15 @@ import pytest
 import trimesh
 
 from calibration.errors import RigError
-from reconstruct.subdivide import beta, sqrt3_step, steps_for, subdivide
+from reconstruct.subdivide import (
+    beta,
+    decimate,
+    mean_edge,
+    non_manifold_faces,
+    sqrt3_step,
+    steps_for,
+    subdivide,
+)
 
 
 def test_closed_mesh_counts_and_topology() -> None:
@@ -81,3 +89,28 @@ def test_steps_for_target_density() -> None:
     assert steps_for(1.0, 0.5, 100, 6, 10**6) == 2  # 1/√3 = 0.58 > 0.5, 1/3 < 0.5
     assert steps_for(1.0, 1e-6, 100, 6, 10**6) == 6
     assert steps_for(1.0, 1e-6, 100, 6, 1000) == 2  # 900 faces ok, 2700 too many
+
+
+def test_a_mesh_finer_than_the_images_is_decimated_to_the_target() -> None:
+    """A dense MVS mesh (here a noisy icosphere of 0.4 mm edges, radius 5 cm) is coarsened to
+    just under the target edge, stays one edge-manifold piece that √3 can subdivide, and
+    keeps its shape."""
+    fine = trimesh.creation.icosphere(subdivisions=7, radius=0.05)
+    rng = np.random.default_rng(0)
+    fine.vertices += rng.normal(0, 2e-5, fine.vertices.shape)
+    target = 2.5 * mean_edge(fine)
+    coarse = decimate(fine, mean_edge(fine), target)
+    assert 0.75 * target < mean_edge(coarse) < 1.25 * target
+    assert len(coarse.vertices) < 0.25 * len(fine.vertices)
+    assert not non_manifold_faces(coarse).any()
+    radius = np.linalg.norm(coarse.vertices, axis=1)
+    assert np.abs(radius - 0.05).max() < 2e-4
+    sqrt3_step(coarse.vertices, coarse.faces)  # raises on a non-manifold mesh
+
+
+def test_non_manifold_faces_are_found() -> None:
+    tri = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0, -1, 0]],
+                          [[0, 1, 2], [1, 0, 3], [0, 1, 4]], process=False)
+    assert non_manifold_faces(tri).tolist() == [True, True, True]  # edge 0-1 has 3 faces
+    ok = trimesh.creation.icosphere(subdivisions=1)
+    assert not non_manifold_faces(ok).any()
