@@ -102,3 +102,21 @@ def test_tiny_session_decodes_to_the_composed_image(shared_data: Path, tmp_path:
     assert lit.mean() > 5 * amb.mean() > 0  # the bulb dominates, the ambient is there
     decoded = decode.run({}, session, tmp_path / "decoded")  # rig reconstruct's decode stage
     assert len(sorted(Path(decoded).glob("frame_*_sat.npy"))) == 12
+
+
+def test_coarse_meshes_are_subdivided_to_a_smooth_scored_surface(tmp_path: Path) -> None:
+    import trimesh
+
+    from bench.external_scene import load_mesh
+
+    path = tmp_path / "ico.obj"
+    trimesh.creation.icosphere(subdivisions=1).export(path)  # 80 faces: ~60 mm edges at 0.2 m
+    mesh = load_mesh(path, 0.2, max_edge_m=0.015)
+    assert float(mesh.edges_unique_length.mean()) <= 0.015
+    assert len(mesh.faces) == 80 * 4**3  # three Loop steps were needed, no more
+    np.testing.assert_allclose(mesh.extents.max(), 0.2)
+    np.testing.assert_allclose(mesh.bounds.mean(axis=0), 0.0, atol=1e-12)
+    # Loop's limit surface: neighbouring faces meet at small angles (the input's: ~42°)
+    assert np.degrees(mesh.face_adjacency_angles.mean()) < 8
+    fine = load_mesh(path, 0.2, max_edge_m=1.0)  # already fine enough: left as it is
+    assert len(fine.faces) == 80
