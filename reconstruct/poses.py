@@ -74,7 +74,8 @@ class PosesConfig:
     (exhaustive up to 60 views); ``max_features``: SIFT features per image;
     ``refine_intrinsics``: let bundle adjustment refine given intrinsics.
 
-    Board: ``board_with_sfm`` also runs SfM and merges it in; ``board_min_corners`` /
+    Board: ``board_with_sfm`` also runs SfM and merges it in (``auto``: only when the board
+    leaves a view unposed — SfM then adds nothing but minutes); ``board_min_corners`` /
     ``board_max_rms_px``: a view gets a board pose with at least this many corners and at most
     this RMS error; ``board_model``: camera model estimated from the board views when the
     profile gives no intrinsics; ``board_refine_intrinsics``: free given intrinsics in the
@@ -95,7 +96,7 @@ class PosesConfig:
     init_min_inliers: int = 30
     refine_intrinsics: bool = False
     num_threads: int = -1
-    board_with_sfm: bool = True
+    board_with_sfm: bool | str = "auto"
     board_min_corners: int = 6
     board_max_rms_px: float = 3.0
     board_model: str = "RADIAL"
@@ -105,6 +106,11 @@ class PosesConfig:
         if self.source not in SOURCES:
             raise RigError(
                 f"poses.source {self.source!r} is unknown", f"use one of {', '.join(SOURCES)}"
+            )
+        if self.board_with_sfm not in (True, False, "auto"):
+            raise RigError(
+                f"poses.board_with_sfm {self.board_with_sfm!r} is unknown",
+                "use auto, true or false",
             )
         if self.matcher not in ("auto", "exhaustive", "sequential"):
             raise RigError(
@@ -499,7 +505,8 @@ def _board_poses(
         return cameras, summary, points
     sfm: tuple[dict[int, tuple[Intrinsics, Pose]], PoseSummary, np.ndarray] | None = None
     sfm_error = None
-    if conf.board_with_sfm:
+    every_view = set(board.poses) >= set(views)
+    if conf.board_with_sfm is True or (conf.board_with_sfm == "auto" and not every_view):
         try:
             sfm = _sfm_poses(session, decoded, decoded_dir, conf, out_dir, board.intrinsics)
         except RigError as exc:

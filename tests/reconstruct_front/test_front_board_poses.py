@@ -101,6 +101,27 @@ def test_sfm_adds_the_view_the_board_misses(
     assert np.abs(moved - points).max() < 2e-3  # SfM points brought into the board frame
 
 
+def test_sfm_runs_beside_the_board_only_where_it_can_add_a_view(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    root = build_board_session(tmp_path / "all", TRUTH[:HIDDEN])  # every view sees the board
+    decode.run({}, root, root / "recon" / "decoded")
+    calls: list[int] = []
+
+    def sfm(*_: Any) -> SfmResult:
+        calls.append(1)
+        return fake_sfm(TRUTH[:HIDDEN], np.zeros((5, 3)))
+
+    monkeypatch.setattr(poses, "run_sfm", sfm)
+    cameras, summary = _poses(root)  # auto
+    assert calls == [] and summary.source == "board" and summary.registered == HIDDEN
+    shutil.rmtree(root / "recon" / "poses")
+    _, summary = _poses(root, {"board_with_sfm": True})  # the cross-check, asked for
+    assert calls == [1] and summary.source == "board+sfm"
+    with pytest.raises(RigError, match="board_with_sfm"):
+        poses.PosesConfig(board_with_sfm="sometimes")
+
+
 def test_failing_sfm_is_tolerated(session_copy: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     def sfm(*_: Any) -> SfmResult:
         raise RigError("structure from motion registered no views", "texture")
