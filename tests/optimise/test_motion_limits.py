@@ -36,11 +36,17 @@ def test_one_stage_moves_no_vertex_more_than_the_step_cap(
     corrupted: tuple[OptimiseInput, np.ndarray],
 ) -> None:
     inp, edge = corrupted
-    cfg = OptimiseSettings(outer_iterations=1, light_iterations=5, joint_iterations=10)
+    cfg = OptimiseSettings(
+        outer_iterations=1, light_iterations=5, joint_iterations=10, max_step_edges=0.5
+    )
     assert moved_edges(inp, edge, cfg).max() <= cfg.max_step_edges + 1e-9
-    # Without the guard the corrupted observations pull vertices further than that.
+    # Without the guards the corrupted observations pull vertices further than that.
     loose = OptimiseSettings(
-        outer_iterations=1, light_iterations=5, joint_iterations=10, max_step_edges=1e9
+        outer_iterations=1,
+        light_iterations=5,
+        joint_iterations=10,
+        max_step_edges=1e9,
+        max_total_edges=1e9,
     )
     assert moved_edges(inp, edge, loose).max() > 1.5 * cfg.max_step_edges
 
