@@ -280,6 +280,7 @@ def lower_products(
             jdx[i] = acc
     ox = np.empty((n, 3))
     oa = np.empty((n, nb))
+    lap_a = np.zeros((n, nb))  # (L δα)_j, preallocated: no heap allocation per vertex
     for j in prange(n):
         for d in range(3):
             ox[j, d] = yu[j, d]
@@ -296,7 +297,7 @@ def lower_products(
                 if with_geometric:
                     for d in range(3):
                         ox[j, d] += jg_blocks[b, d] * jdx[i]
-        la = np.zeros(nb)
+        la = lap_a[j]
         for t in range(lap_indptr[j], lap_indptr[j + 1]):
             m = lap_col[t]
             for b in range(nb):
@@ -307,3 +308,18 @@ def lower_products(
                 acc += dA[j, q] * spectral[q, b] + la[q] * photometric[q, b]
             oa[j, b] = acc
     return ox, oa
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def batched_matvec(blocks: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """``blocks[i] @ vectors[i]`` for every i: (N, k, k) by (N, k). The block preconditioner
+    applies this once per CG iteration; NumPy's einsum took twice as long at 100k vertices."""
+    n, k = vectors.shape
+    out = np.empty((n, k))
+    for i in prange(n):
+        for r in range(k):
+            acc = 0.0
+            for q in range(k):
+                acc += blocks[i, r, q] * vectors[i, q]
+            out[i, r] = acc
+    return out

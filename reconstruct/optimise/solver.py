@@ -21,6 +21,7 @@ import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
 from reconstruct.optimise.cost import JointCost, Linearisation
+from reconstruct.optimise.kernels import batched_matvec
 from reconstruct.optimise.multilevel import CoarseOperator, patch_bumps
 
 PRECONDITIONERS = ("block", "two_level")
@@ -142,7 +143,7 @@ class ArrowheadPreconditioner:
         u = np.concatenate(
             [np.einsum("nam,na->nm", shapes, v[sx].reshape(n, 3)), v[sa].reshape(n, nb)], axis=1
         )
-        zu = np.einsum("nij,nj->ni", self.vert, u).ravel()
+        zu = batched_matvec(self.vert, u).ravel()
         zl = self.schur_inv @ (v[sl] - self.coupling.T @ zu)
         zu = (zu - self.dinv_c @ zl).reshape(n, m + nb)
         zx = np.einsum("nam,nm->na", shapes, zu[:, :m])
