@@ -122,6 +122,46 @@ def test_sfm_runs_beside_the_board_only_where_it_can_add_a_view(
         poses.PosesConfig(board_with_sfm="sometimes")
 
 
+def test_sfm_neighbourhood_of_the_unposed_views_in_capture_order() -> None:
+    views = list(range(40))
+    assert poses.sfm_neighbourhood(views, [0, 39], 4) == [*range(5), *range(35, 40)]
+    assert poses.sfm_neighbourhood(views, [20], 2) == [18, 19, 20, 21, 22]
+
+
+def test_sfm_beside_the_board_runs_on_the_hidden_views_neighbours(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    truth = true_poses(14)  # 14 views see the board, the 15th (14) looks past it
+    root = build_board_session(tmp_path / "s", truth)
+    decode.run({}, root, root / "recon" / "decoded")
+    asked: list[list[str]] = []
+    registers_hidden = [False, True]
+
+    def sfm(image_dir: Path, names: list[str], *_: Any) -> SfmResult:
+        asked.append(sorted(names))
+        full = fake_sfm(truth, np.random.default_rng(0).uniform(-0.05, 0.05, (60, 3)))
+        cameras = {n: c for n, c in full.cameras.items() if n in names}
+        if not registers_hidden.pop(0):
+            cameras.pop("view_0014.png")
+        return SfmResult(cameras, full.points, full.mean_reprojection_error_px)
+
+    monkeypatch.setattr(poses, "run_sfm", sfm)
+    # the neighbourhood's model misses the hidden view: SfM of every view follows
+    cameras, summary = _poses(root)
+    assert [len(a) for a in asked] == [9, 15] and summary.views["14"]["source"] == "sfm"
+    assert len(np.load(root / "recon" / "poses" / "points3D.npy")) == 60
+    # the neighbourhood's model carries it: one small SfM; its one-sided points are dropped
+    asked.clear()
+    registers_hidden[:] = [True]
+    shutil.rmtree(root / "recon" / "poses")
+    cameras, summary = _poses(root)
+    assert asked == [[f"view_{v:04d}.png" for v in (0, 1, 2, 3, 10, 11, 12, 13, 14)]]
+    assert summary.source == "board+sfm" and summary.views["14"]["source"] == "sfm"
+    mm = 1000 * np.linalg.norm(cameras[14][1].center - truth[14].center)
+    assert mm < 2.0
+    assert np.load(root / "recon" / "poses" / "points3D.npy").shape == (0, 3)
+
+
 def test_failing_sfm_is_tolerated(session_copy: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     def sfm(*_: Any) -> SfmResult:
         raise RigError("structure from motion registered no views", "texture")
