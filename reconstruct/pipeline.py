@@ -172,19 +172,28 @@ def optimiser_input(front: FrontResult, session: Session, basis: SpectralBasis) 
     names = sorted({k[1] for k in keys})
     camera, spds = session_spectra(session, names)
     responses = np.stack([response_matrix(camera, spds[n]) for n in names])
-    images, valid, weight = [], [], []
-    for key in keys:
-        img, sat, wt = lit_frame(front, key)
-        images.append(img)
-        valid.append(~sat)
-        weight.append(wt)
-    h, w = images[0].shape[:2]
+    # filled in place: a list of frames stacked then cast held the frames three times over
+    first = lit_frame(front, keys[0])
+    h, w = first[0].shape[:2]
+    images = np.empty((len(keys), h, w, 3), dtype=np.float32)
+    valid = np.empty((len(keys), h, w), dtype=bool)
+    weight = np.empty(len(keys))
+    for f, key in enumerate(keys):
+        img, sat, weight[f] = first if f == 0 else lit_frame(front, key)
+        if img.shape[:2] != (h, w):
+            raise RigError(
+                f"frame view {key[0]} {key[1]} is {img.shape[1]}x{img.shape[0]} but view "
+                f"{keys[0][0]} {keys[0][1]} is {w}x{h}",
+                "capture every frame of a session with the same camera and image size",
+            )
+        images[f] = img
+        valid[f] = ~sat
     frames = Frames(
         np.array([column[k[0]] for k in keys]),
         np.array([names.index(k[1]) for k in keys]),
-        np.stack(images).astype(np.float32),
-        np.stack(valid),
-        np.array(weight),
+        images,
+        valid,
+        weight,
     )
     intr = [_scaled(front.intrinsics[v], w, h) for v in views]
     rig = Rig(intr, [front.poses[v] for v in views], responses)

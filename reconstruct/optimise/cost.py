@@ -34,11 +34,14 @@ from reconstruct.optimise.kernels import (
     accumulate_normal_equations,
     gram_products,
     lower_products,
+    position_diagonal_blocks,
+    project_points,
+    rendered_error,
     sample_bilinear,
 )
 from reconstruct.optimise.mesh import NormalJacobian, adjacency, vertex_normals
 from reconstruct.optimise.problem import Problem
-from reconstruct.optimise.sampling import bilinear_taps, project_with_jacobian
+from reconstruct.optimise.sampling import bilinear_taps, view_cameras
 
 Robust = Literal["none", "huber", "cauchy"]
 TERMS = ("rendering", "spectral", "photometric", "geometric")
@@ -141,19 +144,20 @@ class JointCost:
         self.obs_weight = p.weights.rendering_scale / np.sqrt(np.maximum(o.per_vertex[o.vertex], 1))
         if p.frames.weight is not None:  # noisier (ambient-subtracted) frames count less
             self.obs_weight = self.obs_weight * np.asarray(p.frames.weight, dtype=float)[o.frame]
-        self.light_index = np.zeros(o.count, dtype=np.int64) if p.light_mode == "offset" else o.view
         self.light_maps = p.light_maps()  # ∂p_c/∂θ_light (N_views, 3, 3)
         # (vertex, view) pairs: the geometry of one pair is shared by that view's frames.
         ps = o.pair_start
         self.obs_pair = np.repeat(np.arange(ps.size), np.diff(np.r_[ps, o.count]))
         self.pair_vertex = o.vertex[ps]
         self.pair_view = o.view[ps]
-        self.pair_light = self.light_index[ps]
+        # which light each pair sees: the shared offset (0), or its view's own light
+        self.pair_light = np.zeros(ps.size, np.int64) if p.light_mode == "offset" else o.view[ps]
         self.view_pairs = [np.flatnonzero(self.pair_view == c) for c in range(p.rig.n_views)]
         self.n_illuminations = self.Q.shape[0]
         self.pair_to_light = _summation(self.pair_light, p.n_light // 3)
         self.vertex_pairs = np.searchsorted(self.pair_vertex, np.arange(n + 1))
         self.pair_obs = np.r_[ps, o.count]
+        self.cameras = view_cameras(p.rig.intrinsics, p.rig.poses)
         self._evaluated: tuple[np.ndarray, bool, Geometry, RenderState] | None = None
         self._sampled: (
             tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None] | None
@@ -206,14 +210,14 @@ class JointCost:
         refl = A @ self.B.T
         unit = np.ones(p.n_vertices)
         colours = np.stack([render_values(refl, unit, resp) for resp in p.rig.responses])
-        colour = colours[o.illumination, o.vertex]
-        s = s_pair[self.obs_pair]
-        y = s[:, None] * colour
         if o.fixed_rgb is not None:
             y_obs, image_grad, duv = o.fixed_rgb, None, None
         else:
             y_obs, image_grad, duv = self._sample(X, derivatives and positions)
-        state = RenderState(s, colour, y - y_obs, s_pair, image_grad=image_grad, proj_jac=duv)
+        s, colour, error = rendered_error(
+            colours, s_pair, self.obs_pair, o.vertex, o.illumination, y_obs
+        )
+        state = RenderState(s, colour, error, s_pair, image_grad=image_grad, proj_jac=duv)
         if derivatives:
             dist = np.linalg.norm(d, axis=1)
             dot = np.einsum("ij,ij->i", d, npair)
@@ -243,22 +247,16 @@ class JointCost:
         p, o = self.p, self.p.obs
         images = p.frames.images
         assert images is not None
-        pv = self.pair_vertex
-        size = images.shape[1:3]
-        index = np.empty(pv.size, dtype=np.int64)
-        frac = np.empty((pv.size, 2))
-        duv = np.empty((pv.size, 2, 3)) if gradient else None
-        for c, idx in enumerate(self.view_pairs):
-            if idx.size == 0:
-                continue
-            uv, jac = project_with_jacobian(p.rig.intrinsics[c], p.rig.poses[c], X[pv[idx]])
-            index[idx], fc, fr = bilinear_taps(size, uv)
-            frac[idx, 0], frac[idx, 1] = fc[:, 0], fr[:, 0]
-            if duv is not None:
-                duv[idx] = jac
+        uv, jac = project_points(X, self.pair_vertex, self.pair_view, *self.cameras, gradient)
+        index, fc, fr = bilinear_taps(images.shape[1:3], uv)
+        del uv
+        frac = np.concatenate([fc, fr], axis=1)
         y_obs, grad = sample_bilinear(images, o.frame, self.obs_pair, index, frac, gradient)
-        image_grad = grad if gradient else None
-        self._sampled = (np.array(X, copy=True), y_obs, image_grad, duv)
+        image_grad, duv = (grad, jac) if gradient else (None, None)
+        # with the gradients the positions are moving: a later call at the same X is only
+        # the linearisation of this evaluation, which keeps its own state
+        if not gradient:
+            self._sampled = (np.array(X, copy=True), y_obs, image_grad, duv)
         return y_obs, image_grad, duv
 
     def _robust(self, error: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -356,7 +354,8 @@ class JointCost:
             [geo.dn.tocsr(), sp.csr_array((3 * n, p.size - 3 * n))]
         )
         ren = ren + _blocks(rows3, sa.start + nb * o.vertex, ja, shape)
-        ren = ren + _blocks(rows3, sl.start + 3 * self.light_index, jl, shape)
+        light = self.pair_light[self.obs_pair]
+        ren = ren + _blocks(rows3, sl.start + 3 * light, jl, shape)
         rs = np.broadcast_to(np.sqrt(self.gamma[0]) * self.R_s, (n, nb, nb))
         spec = _blocks(nb * np.arange(n), sa.start + nb * np.arange(n), rs, (nb * n, p.size))
         e = p.weights.edges
@@ -418,7 +417,10 @@ class JointCost:
             self.QtQ,
             shared,
         )
-        light_block = (self.pair_to_light @ (cc[:, None] * _outer(gl, gl))).reshape(-1, 3, 3)
+        # Σ_p cc_p g̃_p g̃_pᵀ per light, a row at a time: no (pairs × 9) temporaries
+        light_block = np.stack(
+            [self.pair_to_light @ ((cc * gl[:, r])[:, None] * gl) for r in range(3)], axis=1
+        )
         light_grad = self.pair_to_light @ (gl * pair_e[:, None])
         if not shared:
             coupling = _pair_coupling(
@@ -438,11 +440,6 @@ class JointCost:
             light_block=light_block,
             light_grad=light_grad,
         )
-
-
-def _outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise outer products (M, r·c) of (M, r) and (M, c)."""
-    return (a[:, :, None] * b[:, None, :]).reshape(len(a), -1)
 
 
 def _pair_coupling(
@@ -576,23 +573,19 @@ class Linearisation:
         dn = self.geometry.dn
         if dn is None or self.geometry.jg_blocks is None:  # positions fixed
             return blk, self.light_block.copy()
-        # Normal chain: Σ_i D_ijᵀ G_nn(i) D_ij into column j, plus the i == j cross terms;
-        # geometric smoothness: Σ_i J_g(i, j)ᵀ J_g(i, j) into column j (same block sparsity).
         nj = c.normal_jacobian
-        rows, cols = nj.block_row, nj.block_col
-        D = dn.data
-        v = self.geometry.jg_blocks
-        contrib = D.transpose(0, 2, 1) @ G[rows, 3:6, 3:6] @ D + _outer(v, v).reshape(-1, 3, 3)
-        xx = (_summation(cols, n) @ contrib.reshape(-1, 9)).reshape(n, 3, 3)
-        self_blk = rows == cols
-        ii = rows[self_blk]
-        Dii = D[self_blk]
-        cross = np.einsum("nab,nbc->nac", G[ii, :3, 3:6], Dii)
-        xx[ii] += cross + cross.transpose(0, 2, 1)
-        xa = np.einsum("nba,nbc->nac", Dii, G[ii, 3:6, 6:])
-        blk[ii, :3, 3:] += xa
-        blk[ii, 3:, :3] += xa.transpose(0, 2, 1)
+        xx, xa = position_diagonal_blocks(
+            G,
+            dn.data,
+            self.geometry.jg_blocks,
+            nj.block_row,
+            nj.block_col,
+            nj.transpose_indptr,
+            nj.transpose_block,
+        )
         blk[:, :3, :3] += xx
+        blk[:, :3, 3:] += xa
+        blk[:, 3:, :3] += xa.transpose(0, 2, 1)
         return blk, self.light_block.copy()
 
     def light_coupling(self) -> np.ndarray | sp.csr_array:

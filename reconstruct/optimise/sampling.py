@@ -14,6 +14,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from reconstruct.camera import Intrinsics, Pose
+from reconstruct.optimise.kernels import project_points
 from reconstruct.optimise.problem import Frames
 
 
@@ -118,34 +119,28 @@ def taps_valid(
     return out
 
 
+ViewCameras = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def view_cameras(intrinsics: list[Intrinsics], poses: list[Pose]) -> ViewCameras:
+    """Per view R (V, 3, 3), t (V, 3), (fx, fy, cx, cy) (V, 4) and OpenCV (k1, k2, p1, p2)
+    (V, 4): the arrays :func:`~reconstruct.optimise.kernels.project_points` reads."""
+    R = np.stack([np.asarray(pose.R, dtype=float) for pose in poses])
+    t = np.stack([np.asarray(pose.t, dtype=float) for pose in poses])
+    camera = np.array([[i.K[0, 0], i.K[1, 1], i.K[0, 2], i.K[1, 2]] for i in intrinsics])
+    distortion = np.stack([i.distortion() for i in intrinsics]).astype(float)
+    return R, t, camera, distortion
+
+
 def project_with_jacobian(
     intrinsics: Intrinsics, pose: Pose, points: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel coordinates (M, 2) of world points and ``∂uv/∂x`` (M, 2, 3).
-
-    The distortion's 2×2 Jacobian is taken by central differences of
-    :meth:`Intrinsics.distort` (a smooth polynomial: exact to ~1e-9), the rest analytically.
-    """
-    xc = pose.to_camera(points)
-    z = xc[:, 2]
-    safe = np.where(np.abs(z) > 1e-12, z, 1e-12)
-    xy = xc[:, :2] / safe[:, None]
-    uv = intrinsics.project_camera(xc)
-    dxy = np.zeros((len(points), 2, 3))
-    dxy[:, 0, 0] = 1.0 / safe
-    dxy[:, 1, 1] = 1.0 / safe
-    dxy[:, 0, 2] = -xy[:, 0] / safe
-    dxy[:, 1, 2] = -xy[:, 1] / safe
-    if intrinsics.distortion().any():
-        h = 1e-6
-        ddist = np.empty((len(points), 2, 2))
-        for k in range(2):
-            step = np.zeros(2)
-            step[k] = h
-            ddist[:, :, k] = (intrinsics.distort(xy + step) - intrinsics.distort(xy - step)) / (
-                2 * h
-            )
-        dxy = np.einsum("mab,mbc->mac", ddist, dxy)
-    focal = np.diag(intrinsics.K)[:2]
-    duv = focal[None, :, None] * dxy
-    return uv, duv @ pose.R
+    """Pixel coordinates (M, 2) of world points and ``∂uv/∂x`` (M, 2, 3), analytically."""
+    idx = np.arange(len(points))
+    return project_points(
+        np.asarray(points, dtype=float),
+        idx,
+        np.zeros_like(idx),
+        *view_cameras([intrinsics], [pose]),
+        True,
+    )

@@ -21,7 +21,11 @@ import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
 from reconstruct.optimise.cost import JointCost, Linearisation
-from reconstruct.optimise.kernels import batched_matvec
+from reconstruct.optimise.kernels import (
+    damped_block_inverses,
+    expand_positions,
+    solve_vertex_blocks,
+)
 from reconstruct.optimise.multilevel import CoarseOperator, patch_bumps
 
 PRECONDITIONERS = ("block", "two_level")
@@ -99,11 +103,10 @@ class ArrowheadPreconditioner:
         basis[:, :3, :m] = np.eye(3)[None] if directions is None else directions[:, :, None]
         basis[:, :3] *= mask[sx].reshape(n, 3, 1)
         basis[:, 3:, m:] = np.eye(nb) * mask[sa].reshape(n, nb, 1)
-        self.basis = basis
+        self.shapes = np.ascontiguousarray(basis[:, :3, :m])  # x = shapes · (x or h)
         dv = np.concatenate([scale[sx].reshape(n, 3), scale[sa].reshape(n, nb)], axis=1)
-        live = np.abs(basis).sum(axis=1) > 0
-        vert = basis.transpose(0, 2, 1) @ ((vert + _diag(lam * dv)) @ basis) + _diag(~live)
-        self.vert = np.linalg.inv(vert)
+        alpha_mask = mask[sa].reshape(n, nb).astype(float)
+        self.vert = damped_block_inverses(vert, lam * dv, self.shapes, alpha_mask)
         ml = mask[sl]
         dense = np.zeros((p.n_light, p.n_light))
         for j in range(light.shape[0]):
@@ -115,9 +118,7 @@ class ArrowheadPreconditioner:
         if isinstance(coupling, np.ndarray):  # shared offset: dense (N, k, 3)
             coupling = basis.transpose(0, 2, 1) @ coupling * ml[None, None, :]
             self.coupling: np.ndarray | sp.csr_array = coupling.reshape(n * k, 3)
-            self.dinv_c: np.ndarray | sp.csr_array = np.einsum(
-                "nij,njl->nil", self.vert, coupling
-            ).reshape(n * k, 3)
+            self.dinv_c: np.ndarray | sp.csr_array = (self.vert @ coupling).reshape(n * k, 3)
             schur = dense - self.coupling.T @ self.dinv_c
         else:
             reduce = sp.bsr_array(
@@ -135,27 +136,16 @@ class ArrowheadPreconditioner:
         self.schur_inv = np.linalg.inv(schur)
 
     def __call__(self, v: np.ndarray) -> np.ndarray:
+        """The preconditioned vector; already in the stage's subspace (masked, along the
+        directions), so the solver need not project it again."""
         p = self.p
         n, nb = p.n_vertices, p.n_basis
         sx, sa, sl = p.slices()
-        shapes = self.basis[:, :3, : -nb or None]  # x = shapes · (x or h); α stays α
-        m = shapes.shape[2]
-        u = np.concatenate(
-            [np.einsum("nam,na->nm", shapes, v[sx].reshape(n, 3)), v[sa].reshape(n, nb)], axis=1
-        )
-        zu = batched_matvec(self.vert, u).ravel()
-        zl = self.schur_inv @ (v[sl] - self.coupling.T @ zu)
-        zu = (zu - self.dinv_c @ zl).reshape(n, m + nb)
-        zx = np.einsum("nam,nm->na", shapes, zu[:, :m])
-        return p.pack(zx, zu[:, m:], zl) * self.mask
-
-
-def _diag(values: np.ndarray) -> np.ndarray:
-    """Diagonal matrices (N, k, k) from their diagonals (N, k)."""
-    out = np.zeros((*values.shape, values.shape[-1]))
-    idx = np.arange(values.shape[-1])
-    out[:, idx, idx] = values
-    return out
+        zu = solve_vertex_blocks(self.vert, self.shapes, v[sx].reshape(n, 3), v[sa].reshape(n, nb))
+        zl = self.schur_inv @ (v[sl] - self.coupling.T @ zu.ravel())
+        zu -= (self.dinv_c @ zl).reshape(zu.shape)
+        zx = expand_positions(self.shapes, zu)
+        return p.pack(zx, zu[:, self.shapes.shape[2] :], zl) * self.mask
 
 
 def _pcg(
@@ -304,21 +294,20 @@ def _levenberg_marquardt(
             break
         pre = ArrowheadPreconditioner(lin, blocks, lam, scale, mask, directions)
 
+        # CG's vectors stay in the stage's subspace (its right-hand side and the
+        # preconditioner's output are projected), so only the product leaves it.
         def op(
             v: np.ndarray, lin: Linearisation = lin, lam: float = lam, scale: np.ndarray = scale
         ) -> np.ndarray:
-            pv = project(v)
-            return project(lin.matvec(pv) + lam * scale * pv)
+            return project(lin.matvec(v) + lam * scale * v)
 
-        def block(v: np.ndarray, pre: ArrowheadPreconditioner = pre) -> np.ndarray:
-            return project(pre(project(v)))
-
-        precondition: Callable[[np.ndarray], np.ndarray] = block
+        precondition: Callable[[np.ndarray], np.ndarray] = pre
         if bumps is not None:
             if coarse is None or coarse.lin is not lin:  # A R once per linearisation
                 coarse = CoarseOperator(lin, bumps, mask, scale, directions)
-            precondition = coarse.preconditioner(lam, block)
+            precondition = coarse.preconditioner(lam, pre)
         delta, cg_it = _pcg(op, -g, precondition, cfg.cg_tolerance, cfg.cg_max_iterations)
+        del pre, op, precondition  # rebuilt next iteration; the trial render needs the room
         gd, dhd = float(g @ delta), float(delta @ lin.matvec(delta))
         # A step the model over-trusted is first shortened along the same direction (a
         # `terms` evaluation each) before λ grows and CG solves again: most rejections
@@ -347,7 +336,7 @@ def _levenberg_marquardt(
             previous = lin.terms["total"]
             theta = trial
             # the old system's blocks go before the new ones are built
-            del lin, pre, op, block, precondition
+            del lin, blocks
             coarse = None
             lin = cost.linearise(theta, positions)
             blocks = lin.diagonal_blocks()

@@ -469,6 +469,7 @@ def optimise(
         """The input of joint stage ``outer`` (light stage: 0): blurred frames while coarse."""
         k = max(outer, 1) - 1
         if k >= len(blurs):
+            levels.clear()  # the full-resolution stages need no blurred copy (0.5 GB at 800×600×80)
             return inp
         if k not in levels:
             levels.clear()  # one blurred copy of the images at a time
