@@ -159,9 +159,7 @@ class JointCost:
         self.pair_obs = np.r_[ps, o.count]
         self.cameras = view_cameras(p.rig.intrinsics, p.rig.poses)
         self._evaluated: tuple[np.ndarray, bool, Geometry, RenderState] | None = None
-        self._sampled: (
-            tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None] | None
-        ) = None
+        self._sampled: tuple[np.ndarray, np.ndarray] | None = None  # (X, y_obs), positions fixed
 
     # --- evaluation ---------------------------------------------------------------------
 
@@ -233,16 +231,13 @@ class JointCost:
         self, X: np.ndarray, gradient: bool
     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         """Observed RGB at the vertices' projections (M, 3), with ``gradient`` the image
-        gradients (M, 3, 2) and projection Jacobians per pair (P, 2, 3). The last result is
-        kept: while the positions stay (light-only stage, a rejected step's retry) the
-        samples are the same."""
+        gradients (M, 3, 2) and projection Jacobians per pair (P, 2, 3). Samples without
+        gradients are kept: while the positions stay (the light-only stage) they are the same.
+        With gradients the positions are moving, and the linearisation at the same X reuses
+        its evaluation's whole state instead."""
         kept = self._sampled
-        if (
-            kept is not None
-            and np.array_equal(kept[0], X)
-            and (kept[2] is not None or not gradient)
-        ):
-            return kept[1], kept[2], kept[3]
+        if not gradient and kept is not None and np.array_equal(kept[0], X):
+            return kept[1], None, None
         kept = self._sampled = None  # free the old samples before the new ones exist
         p, o = self.p, self.p.obs
         images = p.frames.images
@@ -252,12 +247,10 @@ class JointCost:
         del uv
         frac = np.concatenate([fc, fr], axis=1)
         y_obs, grad = sample_bilinear(images, o.frame, self.obs_pair, index, frac, gradient)
-        image_grad, duv = (grad, jac) if gradient else (None, None)
-        # with the gradients the positions are moving: a later call at the same X is only
-        # the linearisation of this evaluation, which keeps its own state
-        if not gradient:
-            self._sampled = (np.array(X, copy=True), y_obs, image_grad, duv)
-        return y_obs, image_grad, duv
+        if gradient:
+            return y_obs, grad, jac
+        self._sampled = (np.array(X, copy=True), y_obs)
+        return y_obs, None, None
 
     def _robust(self, error: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """ρ(z) and the IRLS weight sqrt(ρ'(z)) of z = |e|² per observation."""

@@ -368,8 +368,9 @@ def project_points(
     (vertex, view) pair at each evaluation, and NumPy's passes over (P, 2, 3) arrays took a
     tenth of the solve. Per view: world->camera ``R`` (V, 3, 3), ``t`` (V, 3); ``camera``
     (V, 4) = fx, fy, cx, cy; ``distortion`` (V, 4) = OpenCV k1, k2, p1, p2
-    (:meth:`Intrinsics.distortion`). Points on or behind the camera plane project to NaN, as
-    :meth:`Intrinsics.project_camera`."""
+    (:meth:`Intrinsics.distortion`). A compiled copy of :meth:`Intrinsics.project_camera`
+    (points on or behind the camera plane project to NaN); ``test_sampling.py`` holds the two
+    equal."""
     n = vertex.size
     uv = np.empty((n, 2))
     duv = np.empty((n if gradient else 0, 2, 3))
@@ -381,10 +382,12 @@ def project_points(
         z = R[c, 2, 0] * w0 + R[c, 2, 1] * w1 + R[c, 2, 2] * w2 + t[c, 2]
         k1, k2, p1, p2 = distortion[c, 0], distortion[c, 1], distortion[c, 2], distortion[c, 3]
         fx, fy = camera[c, 0], camera[c, 1]
+        # normalised coordinates and the radial factor, shared by the pixel and its Jacobian
+        inv_z = 1.0 / (z if abs(z) > 1e-12 else 1e-12)
+        x, y = xc0 * inv_z, xc1 * inv_z
+        r2 = x * x + y * y
+        radial = 1.0 + k1 * r2 + k2 * r2 * r2
         if z > 0.0:
-            x, y = xc0 / z, xc1 / z
-            r2 = x * x + y * y
-            radial = 1.0 + k1 * r2 + k2 * r2 * r2
             uv[p, 0] = fx * (x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)) + camera[c, 2]
             uv[p, 1] = fy * (y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y) + camera[c, 3]
         else:
@@ -392,10 +395,6 @@ def project_points(
         if not gradient:
             continue
         # ∂(x, y)/∂x_c = (1/z) [[1, 0, −x], [0, 1, −y]]; the distortion's 2×2 on the left
-        inv_z = 1.0 / (z if abs(z) > 1e-12 else 1e-12)
-        x, y = xc0 * inv_z, xc1 * inv_z
-        r2 = x * x + y * y
-        radial = 1.0 + k1 * r2 + k2 * r2 * r2
         slope = 2.0 * (k1 + 2.0 * k2 * r2)
         cross = slope * x * y + 2.0 * p1 * x + 2.0 * p2 * y
         a = radial + slope * x * x + 2.0 * p1 * y + 6.0 * p2 * x
