@@ -37,6 +37,7 @@ log = logging.getLogger("reconstruct.decode")
 
 INDEX = "index.json"
 SFM_DIR = "sfm"
+FLOAT16_RANGE = 6e4  # largest value a frame may hold to be kept as float16 (max 65504)
 DEMOSAIC = {
     "linear": rawpy.DemosaicAlgorithm.LINEAR,
     "vng": rawpy.DemosaicAlgorithm.VNG,
@@ -252,7 +253,7 @@ def _decode(session: Session, conf: DecodeConfig, out_dir: Path) -> None:
         stem = f"frame_{record.frame:05d}"
         # float16 halves the cache (3 significant digits, below sensor noise) unless the
         # exposure normalisation pushes values past its range (65504)
-        small = float(rgb.max()) < 6e4
+        small = float(rgb.max()) < FLOAT16_RANGE
         np.save(out_dir / f"{stem}.npy", rgb.astype(np.float16 if small else np.float32))
         np.save(out_dir / f"{stem}_sat.npy", mask)
         frames.append(

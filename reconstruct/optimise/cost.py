@@ -40,7 +40,7 @@ from reconstruct.optimise.kernels import (
     sample_bilinear,
 )
 from reconstruct.optimise.mesh import NormalJacobian, adjacency, vertex_normals
-from reconstruct.optimise.problem import Problem
+from reconstruct.optimise.problem import Observations, Problem
 from reconstruct.optimise.sampling import bilinear_taps, view_cameras
 
 Robust = Literal["none", "huber", "cauchy"]
@@ -68,8 +68,7 @@ class RenderState:
     """Per-observation quantities at one θ; the geometric ones are per (vertex, view) pair
     (shared by that view's frames), derivative parts only when asked."""
 
-    s: np.ndarray  # shading per observation (M,)
-    colour: np.ndarray  # unit-shading rendered RGB C^T L_k B α_i (M, 3)
+    colours: np.ndarray  # unit-shading rendered RGB C^T L_k B α_i per (k, i) (K, N, 3)
     error: np.ndarray  # y − y_obs (M, 3)
     pair_s: np.ndarray  # shading per pair (P,)
     g: np.ndarray | None = None  # ∂s/∂p (= −∂s/∂x with n fixed) per pair (P, 3)
@@ -84,6 +83,11 @@ class RenderState:
         if self.image_grad is None or self.proj_jac is None:
             return None
         return self.image_grad @ self.proj_jac[obs_pair]
+
+    def observed(self, obs: Observations, obs_pair: np.ndarray) -> np.ndarray:
+        """The observed RGB per observation (M, 3), y_obs = s c − error."""
+        s = self.pair_s[obs_pair]
+        return s[:, None] * self.colours[obs.illumination, obs.vertex] - self.error
 
 
 @dataclass
@@ -147,7 +151,7 @@ class JointCost:
         self.light_maps = p.light_maps()  # ∂p_c/∂θ_light (N_views, 3, 3)
         # (vertex, view) pairs: the geometry of one pair is shared by that view's frames.
         ps = o.pair_start
-        self.obs_pair = np.repeat(np.arange(ps.size), np.diff(np.r_[ps, o.count]))
+        self.obs_pair = np.repeat(np.arange(ps.size, dtype=np.int32), np.diff(np.r_[ps, o.count]))
         self.pair_vertex = o.vertex[ps]
         self.pair_view = o.view[ps]
         # which light each pair sees: the shared offset (0), or its view's own light
@@ -212,10 +216,8 @@ class JointCost:
             y_obs, image_grad, duv = o.fixed_rgb, None, None
         else:
             y_obs, image_grad, duv = self._sample(X, derivatives and positions)
-        s, colour, error = rendered_error(
-            colours, s_pair, self.obs_pair, o.vertex, o.illumination, y_obs
-        )
-        state = RenderState(s, colour, error, s_pair, image_grad=image_grad, proj_jac=duv)
+        error = rendered_error(colours, s_pair, self.obs_pair, o.vertex, o.illumination, y_obs)
+        state = RenderState(colours, error, s_pair, image_grad=image_grad, proj_jac=duv)
         if derivatives:
             dist = np.linalg.norm(d, axis=1)
             dot = np.einsum("ij,ij->i", d, npair)
@@ -331,15 +333,16 @@ class JointCost:
         sx, sa, sl = p.slices()
         w = self.obs_weight
         g, h = st.g[self.obs_pair], st.h[self.obs_pair]
-        jx = -st.colour[:, :, None] * g[:, None, :]
+        colour = st.colours[o.illumination, o.vertex]
+        jx = -colour[:, :, None] * g[:, None, :]
         obs_grad = st.obs_grad(self.obs_pair)
         if obs_grad is not None:
             jx = jx - obs_grad
         jx *= w[:, None, None]
-        jn = w[:, None, None] * st.colour[:, :, None] * h[:, None, :]
-        ja = (w * st.s)[:, None, None] * self.Q[o.illumination]
+        jn = w[:, None, None] * colour[:, :, None] * h[:, None, :]
+        ja = (w * st.pair_s[self.obs_pair])[:, None, None] * self.Q[o.illumination]
         gl = np.einsum("mab,ma->mb", self.light_maps[o.view], g)  # g̃ = M_cᵀ g
-        jl = w[:, None, None] * st.colour[:, :, None] * gl[:, None, :]
+        jl = w[:, None, None] * colour[:, :, None] * gl[:, None, :]
         rows3 = 3 * np.arange(m)
         shape = (3 * m, p.size)
         ren = _blocks(rows3, 3 * o.vertex, jx, shape)
@@ -397,9 +400,8 @@ class JointCost:
             self.pair_obs,
             o.illumination,
             wt,
-            st.colour,
+            st.colours,
             wt[:, None] * st.error,
-            st.s,
             grad,
             st.pair_s,
             st.g,

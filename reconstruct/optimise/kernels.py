@@ -12,10 +12,27 @@ pairs and a pair's frames are contiguous ranges.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, types
+from numba.extending import overload
+
+# float16 as float64, by bit pattern: numba has no float16 type on the CPU, so float16 frames
+# reach the kernels as their uint16 bits and are decoded by this table (exact, 0.5 MB).
+HALF_TABLE = np.arange(2**16, dtype=np.uint16).view(np.float16).astype(np.float64)
+_NO_TABLE = np.empty(0)
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+def texel(texels: np.ndarray, table: np.ndarray, f: int, r: int, c: int, ch: int) -> float:
+    """One image value as float64: ``texels`` are floats, or float16 bits decoded by ``table``."""
+    raise NotImplementedError("compiled only (numba overload below)")
+
+
+@overload(texel, inline="always")
+def _texel(texels, table, f, r, c, ch):
+    if isinstance(texels.dtype, types.Integer):
+        return lambda texels, table, f, r, c, ch: table[texels[f, r, c, ch]]
+    return lambda texels, table, f, r, c, ch: float(texels[f, r, c, ch])
+
+
 def sample_bilinear(
     images: np.ndarray,
     frame: np.ndarray,
@@ -27,9 +44,25 @@ def sample_bilinear(
     """Bilinear values (M, C) of ``images`` (F, H, W, C) and with ``gradient`` their
     ``∂value/∂(u, v)`` (M, C, 2) (else an empty array). Observation m reads frame
     ``frame[m]`` at the taps of its pair ``obs_pair[m]``: the flat top-left tap ``index`` (P,)
-    and the fractions ``frac`` (P, 2) along columns and rows (``sampling.bilinear_taps``)."""
+    and the fractions ``frac`` (P, 2) along columns and rows (``sampling.bilinear_taps``).
+    float16 images are read through :data:`HALF_TABLE`."""
+    half = images.dtype == np.float16
+    texels, table = (images.view(np.uint16), HALF_TABLE) if half else (images, _NO_TABLE)
+    return _sample_bilinear(texels, table, frame, obs_pair, index, frac, gradient)
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def _sample_bilinear(
+    texels: np.ndarray,
+    table: np.ndarray,
+    frame: np.ndarray,
+    obs_pair: np.ndarray,
+    index: np.ndarray,
+    frac: np.ndarray,
+    gradient: bool,
+) -> tuple[np.ndarray, np.ndarray]:
     m_count = obs_pair.size
-    width, nc = images.shape[2], images.shape[3]
+    width, nc = texels.shape[2], texels.shape[3]
     value = np.empty((m_count, nc))
     grad = np.empty((m_count if gradient else 0, nc, 2))
     for m in prange(m_count):
@@ -38,10 +71,10 @@ def sample_bilinear(
         fc, fr = frac[p, 0], frac[p, 1]
         f = frame[m]
         for c in range(nc):
-            i00 = float(images[f, r0, c0, c])
-            i01 = float(images[f, r0, c0 + 1, c])
-            i10 = float(images[f, r0 + 1, c0, c])
-            i11 = float(images[f, r0 + 1, c0 + 1, c])
+            i00 = texel(texels, table, f, r0, c0, c)
+            i01 = texel(texels, table, f, r0, c0 + 1, c)
+            i10 = texel(texels, table, f, r0 + 1, c0, c)
+            i11 = texel(texels, table, f, r0 + 1, c0 + 1, c)
             d0 = i01 - i00
             d1 = i11 - i10
             top = i00 + fc * d0
@@ -59,9 +92,8 @@ def accumulate_normal_equations(
     pair_obs: np.ndarray,
     illumination: np.ndarray,
     weight: np.ndarray,
-    colour: np.ndarray,
+    colours: np.ndarray,
     residual: np.ndarray,
-    obs_shading: np.ndarray,
     image_grad: np.ndarray,
     pair_shading: np.ndarray,
     g: np.ndarray,
@@ -78,9 +110,9 @@ def accumulate_normal_equations(
     ``A_o = w (c_o u_pᵀ + V_o)``, ``u_p = [−g, h, 0]``, ``V_o = [−G_o, 0, s Q_k]`` with
     ``G_o = grad_o duv_p`` (see ``JointCost.linearise``); ``r_o = w e_o``. Inputs: pairs of
     vertex i are ``vertex_pairs[i]:vertex_pairs[i+1]``, observations of pair p
-    ``pair_obs[p]:pair_obs[p+1]``; ``weight`` w (M,), ``colour`` c (M, 3), ``residual``
-    r = w e (M, 3), ``obs_shading`` s (M,), ``image_grad`` (M, 3, 2) or empty (fixed
-    observations), per pair the shading, g, h (P, 3), ``proj_jac`` (P, 2, 3) and
+    ``pair_obs[p]:pair_obs[p+1]``; ``weight`` w (M,), ``colours`` c per (illumination,
+    vertex) (K, N, 3), ``residual`` r = w e (M, 3), ``image_grad`` (M, 3, 2) or empty (fixed
+    observations), per pair the shading s, g, h (P, 3), ``proj_jac`` (P, 2, 3) and
     ``light_grad`` g̃ = M_cᵀ g (P, 3); ``Q`` (K, 3, N_b) and ``QtQ`` (K, N_b, N_b).
 
     Returns gram (N, k, k), grad_u (N, k), a_p = Σ_o A_oᵀ w c_o (P, k; empty for a light
@@ -116,13 +148,13 @@ def accumulate_normal_equations(
                 w = weight[o]
                 w2 = w * w
                 ill = illumination[o]
-                c0, c1, c2 = colour[o, 0], colour[o, 1], colour[o, 2]
+                c0, c1, c2 = colours[ill, i, 0], colours[ill, i, 1], colours[ill, i, 2]
                 r0, r1, r2 = residual[o, 0], residual[o, 1], residual[o, 2]
                 cc += w2 * (c0 * c0 + c1 * c1 + c2 * c2)
                 pe += w * (c0 * r0 + c1 * r1 + c2 * r2)
                 for b in range(nb):
                     e_alpha[b] += w2 * (c0 * Q[ill, 0, b] + c1 * Q[ill, 1, b] + c2 * Q[ill, 2, b])
-                s = obs_shading[o]
+                s = pair_shading[p]
                 group_s2[ill] += w2 * s * s
                 group_sr[ill, 0] += w * s * r0
                 group_sr[ill, 1] += w * s * r1
@@ -415,21 +447,17 @@ def rendered_error(
     vertex: np.ndarray,
     illumination: np.ndarray,
     observed: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per observation its shading s (M,), unit-shading colour c = ``colours[ill, vertex]``
-    (M, 3) and the error s c − y_obs (M, 3), in one pass (no (M, 3) temporaries)."""
+) -> np.ndarray:
+    """Per observation the error s c − y_obs (M, 3), with s its pair's shading and c
+    ``colours[ill, vertex]``, in one pass (no per-observation s or c is kept: 0.15 GB at 5M
+    observations)."""
     m_count = obs_pair.size
-    s = np.empty(m_count)
-    colour = np.empty((m_count, 3))
     error = np.empty((m_count, 3))
     for m in prange(m_count):
         sm = pair_shading[obs_pair[m]]
-        s[m] = sm
         for ch in range(3):
-            cm = colours[illumination[m], vertex[m], ch]
-            colour[m, ch] = cm
-            error[m, ch] = sm * cm - observed[m, ch]
-    return s, colour, error
+            error[m, ch] = sm * colours[illumination[m], vertex[m], ch] - observed[m, ch]
+    return error
 
 
 @njit(parallel=True, cache=True, fastmath=True)

@@ -84,11 +84,13 @@ class Observations:
         frame = np.asarray(frame, dtype=np.int64)
         view = frames.view[frame]
         order = np.lexsort((frame, view, vertex))
+        # int32 indices: four per observation, 0.08 GB less at 5M observations; arithmetic on
+        # them (flat indices) must widen first
         obs = cls(
-            vertex[order],
-            frame[order],
-            view[order],
-            frames.illumination[frame[order]],
+            vertex[order].astype(np.int32),
+            frame[order].astype(np.int32),
+            view[order].astype(np.int32),
+            frames.illumination[frame[order]].astype(np.int32),
             None if fixed_rgb is None else np.asarray(fixed_rgb, dtype=float)[order],
         )
         obs._index(n_vertices)

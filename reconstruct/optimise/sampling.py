@@ -57,7 +57,7 @@ def sample_taps(
     _, h, w, nc = images.shape
     flat = images.reshape(-1, nc)
     index, fc, fr = taps
-    at = frame * (h * w) + index
+    at = frame.astype(np.int64) * (h * w) + index  # frames × pixels passes 2³¹ at 24 MP
     # One take of the four interleaved taps (np.take is ~3× faster than fancy indexing here).
     quad = np.take(flat, (at[:, None] + np.array([0, 1, w, w + 1])).ravel(), axis=0)
     quad = quad.reshape(len(at), 4, nc).astype(float)
@@ -84,9 +84,11 @@ def blur_frames(frames: Frames, sigma: np.ndarray) -> Frames:
     valid = np.empty_like(frames.valid)
     for f in range(frames.count):
         s = float(sigma[frames.view[f]])
-        mask = frames.valid[f].astype(images.dtype)
+        # filtered in float32 at least (ndimage has no float16), stored as the frames are
+        work = np.promote_types(images.dtype, np.float32)
+        mask = frames.valid[f].astype(work)
         weight = gaussian_filter(mask, s, mode="nearest")
-        kept = np.where(frames.valid[f][..., None], frames.images[f], 0).astype(images.dtype)
+        kept = np.where(frames.valid[f][..., None], frames.images[f], 0).astype(work)
         blurred = gaussian_filter(kept, (s, s, 0), mode="nearest")
         valid[f] = weight > 0.5
         images[f] = blurred / np.maximum(weight, 1e-6)[..., None]

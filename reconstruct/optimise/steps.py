@@ -344,13 +344,14 @@ def initial_reflectance(
     X, A, light = problem.unpack(theta)
     normals, _ = vertex_normals(X, problem.faces)
     st = cost.render(X, A, light, normals, derivatives=False)
-    y_obs = st.s[:, None] * st.colour - st.error
     o = problem.obs
+    y_obs = st.observed(o, cost.obs_pair)
+    s = st.pair_s[cost.obs_pair]
     n, k = problem.n_vertices, problem.rig.responses.shape[0]
     s2 = np.zeros((n, k))
     sy = np.zeros((n, k, 3))
-    np.add.at(s2, (o.vertex, o.illumination), st.s**2)
-    np.add.at(sy, (o.vertex, o.illumination), st.s[:, None] * y_obs)
+    np.add.at(s2, (o.vertex, o.illumination), s**2)
+    np.add.at(sy, (o.vertex, o.illumination), s[:, None] * y_obs)
     seen = s2 > 0
     root = np.sqrt(s2)
     rgb = np.full((n, k, 3), np.nan)

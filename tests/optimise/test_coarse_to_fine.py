@@ -32,6 +32,24 @@ def test_blur_reaches_sigma_and_keeps_saturation_out() -> None:
     assert frames.images is images  # the input is not modified
 
 
+def test_float16_frames_blur_as_float32_ones_and_stay_float16() -> None:
+    """The pipeline keeps frames as float16; ndimage cannot filter that, so the blur works in
+    float32 and stores float16 — equal to the float32 blur up to float16 rounding."""
+    rng = np.random.default_rng(0)
+    images = rng.uniform(0.0, 1.0, (2, 30, 40, 3)).astype(np.float16)
+    valid = rng.uniform(size=images.shape[:3]) > 0.05
+    frames = Frames(np.array([0, 1]), np.array([0, 0]), images, valid)
+    half = blur_frames(frames, np.array([1.5, 3.0]))
+    full = blur_frames(
+        Frames(frames.view, frames.illumination, images.astype(np.float32), valid),
+        np.array([1.5, 3.0]),
+    )
+    assert half.images is not None and full.images is not None
+    assert half.images.dtype == np.float16
+    assert np.array_equal(half.valid, full.valid)
+    assert np.allclose(half.images, full.images, rtol=1e-3, atol=1e-4)
+
+
 def test_coarse_settings_are_checked() -> None:
     cfg = OptimiseSettings.from_mapping({"coarse_blur_px": 4, "coarse_levels": 3})
     assert coarse_blurs(cfg, images=True) == [4.0, 2.0, 1.0]

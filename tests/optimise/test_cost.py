@@ -36,10 +36,12 @@ def test_rendering_uses_the_forward_model(scene: SyntheticScene) -> None:
     i = o.vertex[:50]
     s = shading(X[i], normals[i], P[o.view[:50]])
     refl = scene.basis.reconstruct(A[i])
+    rendered = st.pair_s[cost.obs_pair[:50], None] * st.colours[o.illumination[:50], i]
+    np.testing.assert_allclose(rendered, st.observed(o, cost.obs_pair)[:50] + st.error[:50])
     for k in range(2):
         sel = o.illumination[:50] == k
         y = render_values(refl[sel], s[sel], problem.rig.responses[k])
-        assert np.allclose(st.s[:50][sel, None] * st.colour[:50][sel], y)
+        assert np.allclose(rendered[sel], y)
     assert np.allclose(problem.rig.responses[0], response_matrix_like(problem.rig.responses[0]))
 
 

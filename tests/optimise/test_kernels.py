@@ -64,9 +64,6 @@ def test_rendered_error_is_shading_times_colour_minus_observed() -> None:
     vertex = np.array([0, 0, 1, 3, 3])
     illumination = np.array([0, 1, 0, 0, 1])
     observed = rng.uniform(size=(5, 3))
-    s, colour, error = rendered_error(
-        colours, pair_shading, obs_pair, vertex, illumination, observed
-    )
-    assert np.array_equal(s, pair_shading[obs_pair])
-    assert np.array_equal(colour, colours[illumination, vertex])
-    assert np.allclose(error, s[:, None] * colour - observed)
+    error = rendered_error(colours, pair_shading, obs_pair, vertex, illumination, observed)
+    s, colour = pair_shading[obs_pair], colours[illumination, vertex]
+    assert np.allclose(error, s[:, None] * colour - observed, rtol=1e-14, atol=1e-15)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.ndimage import map_coordinates
 
 from reconstruct.camera import Intrinsics, Pose
@@ -99,13 +100,15 @@ def test_points_behind_the_camera_are_clamped_not_an_error() -> None:
     assert np.allclose(value[0], img[1, 0, 0]) and np.allclose(value[1], img[1, 0, 5])
 
 
-def test_compiled_sampler_matches_the_numpy_one() -> None:
+@pytest.mark.parametrize("dtype", [np.float16, np.float32, np.float64])
+def test_compiled_sampler_matches_the_numpy_one(dtype: type) -> None:
     """The cost samples through ``kernels.sample_bilinear`` (taps per pair, frames per
-    observation); it must give the same values and gradients as :func:`sample_taps`."""
+    observation); it must give the same values and gradients as :func:`sample_taps`, for the
+    float16 frames of the pipeline (read by bit pattern) as for float32/64."""
     from reconstruct.optimise.kernels import sample_bilinear
 
     rng = np.random.default_rng(3)
-    images = rng.uniform(size=(4, 9, 11, 3)).astype(np.float32)
+    images = rng.uniform(size=(4, 9, 11, 3)).astype(dtype)
     uv = rng.uniform([-1.0, -1.0], [12.0, 10.0], size=(5, 2))  # some off the image: clamped
     index, fc, fr = bilinear_taps((9, 11), uv)
     obs_pair = np.array([0, 0, 1, 2, 2, 3, 4, 4])
