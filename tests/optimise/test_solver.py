@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from reconstruct.optimise.cost import JointCost
+from reconstruct.optimise.cost import JointCost, Linearisation
 from reconstruct.optimise.solver import SolverSettings, levenberg_marquardt
 from reconstruct.optimise.steps import OptimiseSettings, build_problem, initial_reflectance
 from reconstruct.optimise.synthetic import SyntheticScene, make_scene
@@ -100,3 +100,35 @@ def test_normal_motion_moves_vertices_only_along_their_normals(scene: SyntheticS
     tangential = moved - np.einsum("ij,ij->i", moved, normals)[:, None] * normals
     assert np.abs(tangential).max() < 1e-12
     assert result.terms["total"] < JointCost(problem).terms(theta)["total"]
+
+
+class RefusingCost(JointCost):
+    """A joint cost whose trial steps all fail once the solve has taken one step."""
+
+    linearised = 0
+
+    def terms(self, theta: np.ndarray, positions: bool = True) -> dict[str, float]:
+        out = super().terms(theta, positions)
+        return {**out, "total": np.inf} if self.linearised >= 2 else out
+
+    def linearise(self, theta: np.ndarray, positions: bool = True) -> Linearisation:
+        self.linearised += 1
+        return super().linearise(theta, positions)
+
+
+def test_a_rejection_after_a_small_gain_ends_the_solve(scene: SyntheticScene) -> None:
+    """A step rejected right after one that removed less than ``stall_tolerance`` of the cost
+    ends the solve (no more CG solves for a smaller gain); below it, LM raises λ and retries."""
+    problem = build_problem(scene.input(), scene.vertices, np.zeros((1, 3)), OptimiseSettings())
+    theta = problem.pack(scene.vertices, scene.alpha * 0.8, np.zeros(3))
+    mask = problem.mask(False, True, True)
+    runs = {}
+    for stall in (1.0, 0.0):
+        settings = SolverSettings(max_iterations=5, function_tolerance=0.0, stall_tolerance=stall)
+        runs[stall] = levenberg_marquardt(RefusingCost(problem), theta, mask, settings)
+    stalled, retried = runs[1.0], runs[0.0]
+    assert [r.accepted for r in stalled.history] == [True, False]
+    assert stalled.stop_reason.startswith("stalled")
+    assert [r.accepted for r in retried.history] == [True, False, False, False, False]
+    assert retried.stop_reason == "maximum iterations"
+    assert stalled.terms["total"] == retried.terms["total"]  # the retries gained nothing
