@@ -153,9 +153,7 @@ def run_front(
     initial_mesh_file: Path | None = None,
 ) -> FrontResult:
     """Run (or resume) the five stages on a session directory."""
-    # absolute: the stages' stamps hash their input paths, so `sessions/vase` and
-    # `/data/sessions/vase` must not count as different inputs
-    session_dir = Path(session_dir).resolve()
+    session_dir = Path(session_dir)
     conf = conf if isinstance(conf, FrontConfig) else FrontConfig.from_mapping(conf or {})
     session = Session.open(session_dir)
     projector = has_gray_code(session)

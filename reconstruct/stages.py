@@ -52,9 +52,11 @@ def _files(paths: Iterable[Path]) -> list[Path]:
 
 
 def stage_hash(conf: Mapping[str, Any], inputs: Iterable[Path]) -> str:
-    """Hash of the configuration and of each input file's path, size and mtime."""
+    """Hash of the configuration and of each input file's path, size and mtime. The path is
+    resolved first: `sessions/vase/...` and `/data/sessions/vase/...` are one file."""
     digest = hashlib.sha256(json.dumps(conf, sort_keys=True, default=str).encode())
     for path in _files(inputs):
+        path = path.resolve()
         stat = path.stat() if path.exists() else None
         key = f"{path}|{stat.st_size}|{stat.st_mtime_ns}" if stat else f"{path}|missing"
         digest.update(key.encode())

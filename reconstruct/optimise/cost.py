@@ -40,7 +40,7 @@ from reconstruct.optimise.kernels import (
     sample_bilinear,
 )
 from reconstruct.optimise.mesh import NormalJacobian, adjacency, vertex_normals
-from reconstruct.optimise.problem import Observations, Problem
+from reconstruct.optimise.problem import Problem
 from reconstruct.optimise.sampling import bilinear_taps, view_cameras
 
 Robust = Literal["none", "huber", "cauchy"]
@@ -83,11 +83,6 @@ class RenderState:
         if self.image_grad is None or self.proj_jac is None:
             return None
         return self.image_grad @ self.proj_jac[obs_pair]
-
-    def observed(self, obs: Observations, obs_pair: np.ndarray) -> np.ndarray:
-        """The observed RGB per observation (M, 3), y_obs = s c − error."""
-        s = self.pair_s[obs_pair]
-        return s[:, None] * self.colours[obs.illumination, obs.vertex] - self.error
 
 
 @dataclass

@@ -82,10 +82,10 @@ def blur_frames(frames: Frames, sigma: np.ndarray) -> Frames:
     assert frames.images is not None and frames.valid is not None
     images = np.empty_like(frames.images)
     valid = np.empty_like(frames.valid)
+    # filtered in float32 at least (ndimage has no float16), stored as the frames are
+    work = np.promote_types(images.dtype, np.float32)
     for f in range(frames.count):
         s = float(sigma[frames.view[f]])
-        # filtered in float32 at least (ndimage has no float16), stored as the frames are
-        work = np.promote_types(images.dtype, np.float32)
         mask = frames.valid[f].astype(work)
         weight = gaussian_filter(mask, s, mode="nearest")
         kept = np.where(frames.valid[f][..., None], frames.images[f], 0).astype(work)

@@ -345,8 +345,8 @@ def initial_reflectance(
     normals, _ = vertex_normals(X, problem.faces)
     st = cost.render(X, A, light, normals, derivatives=False)
     o = problem.obs
-    y_obs = st.observed(o, cost.obs_pair)
     s = st.pair_s[cost.obs_pair]
+    y_obs = s[:, None] * st.colours[o.illumination, o.vertex] - st.error
     n, k = problem.n_vertices, problem.rig.responses.shape[0]
     s2 = np.zeros((n, k))
     sy = np.zeros((n, k, 3))

@@ -6,7 +6,9 @@ import json
 import os
 from pathlib import Path
 
-from reconstruct.stages import run_stage
+import pytest
+
+from reconstruct.stages import run_stage, stage_hash
 
 
 def test_skips_reruns_and_times(tmp_path: Path) -> None:
@@ -43,3 +45,15 @@ def test_interrupted_stage_runs_again(tmp_path: Path) -> None:
         pass
     assert not (out / ".stamp.json").exists()
     assert not run_stage("s", {}, [], out, lambda: None).skipped
+
+
+def test_an_input_hashes_alike_however_its_path_is_spelled(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    (tmp_path / "session").mkdir()
+    (tmp_path / "session" / "frame.npy").write_bytes(b"x")
+    monkeypatch.chdir(tmp_path)
+    absolute = stage_hash({"a": 1}, [tmp_path / "session" / "frame.npy"])
+    assert stage_hash({"a": 1}, [Path("session/frame.npy")]) == absolute
+    assert stage_hash({"a": 1}, [Path("session/../session/frame.npy")]) == absolute
+    assert stage_hash({"a": 2}, [Path("session/frame.npy")]) != absolute
