@@ -556,3 +556,112 @@ def position_diagonal_blocks(
                         acc += dn_blocks[b, u, r] * gram[j, 3 + u, 6 + a]
                     xa[j, r, a] = acc
     return xx, xa
+
+
+@njit(parallel=True, cache=True)
+def ring_pair_slots(
+    indptr: np.ndarray, col: np.ndarray, pair_indptr: np.ndarray, pair_indices: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """For every vertex i and every pair (c, b) of its normal-Jacobian blocks, the slot of the
+    vertex pair (col[c], col[b]) in the CSR pattern ``pair_indptr``/``pair_indices`` (sorted
+    columns): where :func:`position_columns` adds i's share of the position block.
+    Returns ``offsets`` (N + 1; vertex i's r_i² slots start at ``offsets[i]``) and ``slots``."""
+    n = indptr.shape[0] - 1
+    offsets = np.zeros(n + 1, dtype=np.int64)
+    for i in range(n):
+        r = indptr[i + 1] - indptr[i]
+        offsets[i + 1] = offsets[i] + r * r
+    slots = np.empty(offsets[n], dtype=np.int32)  # ~6.5M at 130k vertices
+    for i in prange(n):
+        start, r = indptr[i], indptr[i + 1] - indptr[i]
+        for c in range(r):
+            row = col[start + c]
+            lo0, hi0 = pair_indptr[row], pair_indptr[row + 1]
+            for b in range(r):
+                target = col[start + b]
+                lo, hi = lo0, hi0
+                while lo < hi:  # binary search in the row's sorted columns
+                    mid = (lo + hi) // 2
+                    if pair_indices[mid] < target:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                slots[offsets[i] + c * r + b] = lo
+    return offsets, slots
+
+
+@njit(cache=True, fastmath=True)
+def position_columns(
+    gram: np.ndarray,
+    shapes: np.ndarray,
+    indptr: np.ndarray,
+    col: np.ndarray,
+    dn_blocks: np.ndarray,
+    geometric: np.ndarray,
+    offsets: np.ndarray,
+    slots: np.ndarray,
+    n_pairs: int,
+    coupling: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """JᵀJ's columns along every vertex's motion shapes S_j (N, 3, m), by vertex: vertex i's
+    step in u_i = [x_i, n_i, α_i] from a shape step h_j of a ring vertex j is
+    U_ij = [δ_ij S_i; D_ij S_j; 0], so i adds ``U_icᵀ G_i U_ib + w_icᵀ w_ib`` (w = J_g S, the
+    geometric term) to the position block at (j_c, j_b), ``(G_i U_ib)[α]`` to α_i's rows and
+    ``C_iᵀ U_ib`` to the shared light's rows (``coupling`` (N, k, 3), or empty).
+
+    Returns the position block's values (n_pairs, m, m) on the :func:`ring_pair_slots`
+    pattern, the α rows (blocks, N_b, m) on the normal Jacobian's pattern and the light rows
+    (3, N, m). Serial: the vertices' shares overlap (a 2-ring per column)."""
+    n, k = gram.shape[0], gram.shape[1]
+    m = shapes.shape[2]
+    nb = k - 6
+    shared = coupling.shape[0] > 0
+    hh = np.zeros((n_pairs, m, m))
+    ah = np.empty((col.shape[0], nb, m))
+    light = np.zeros((3, n, m))
+    r_max = 0
+    for i in range(n):
+        r_max = max(r_max, indptr[i + 1] - indptr[i])
+    U = np.zeros((r_max, 6, m))
+    Y = np.zeros((r_max, k, m))
+    w = np.zeros((r_max, m))
+    for i in range(n):
+        start, r = indptr[i], indptr[i + 1] - indptr[i]
+        for t in range(r):
+            b, j = start + t, col[start + t]
+            for q in range(m):
+                for a in range(3):
+                    U[t, a, q] = shapes[i, a, q] if j == i else 0.0
+                    U[t, 3 + a, q] = (
+                        dn_blocks[b, a, 0] * shapes[j, 0, q]
+                        + dn_blocks[b, a, 1] * shapes[j, 1, q]
+                        + dn_blocks[b, a, 2] * shapes[j, 2, q]
+                    )
+                w[t, q] = (
+                    geometric[b, 0] * shapes[j, 0, q]
+                    + geometric[b, 1] * shapes[j, 1, q]
+                    + geometric[b, 2] * shapes[j, 2, q]
+                )
+                for row in range(k):
+                    acc = 0.0
+                    for s in range(6):
+                        acc += gram[i, row, s] * U[t, s, q]
+                    Y[t, row, q] = acc
+                for a in range(nb):
+                    ah[b, a, q] = Y[t, 6 + a, q]
+                if shared:
+                    for d in range(3):
+                        acc = 0.0
+                        for s in range(6):
+                            acc += coupling[i, s, d] * U[t, s, q]
+                        light[d, j, q] += acc
+        for c in range(r):
+            for t in range(r):
+                slot = slots[offsets[i] + c * r + t]
+                for p in range(m):
+                    for q in range(m):
+                        acc = w[c, p] * w[t, q]
+                        for s in range(6):
+                            acc += U[c, s, p] * Y[t, s, q]
+                        hh[slot, p, q] += acc
+    return hh, ah, light

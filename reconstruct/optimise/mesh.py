@@ -10,8 +10,12 @@ exactly as in the cost, not through a frozen approximation.
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 import scipy.sparse as sp
+
+from reconstruct.optimise.kernels import ring_pair_slots
 
 
 def cross_matrices(u: np.ndarray) -> np.ndarray:
@@ -51,10 +55,10 @@ def unnormalised_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     x = np.asarray(vertices, dtype=float)
     f = np.asarray(faces, dtype=np.int64)
     fn = np.cross(x[f[:, 1]] - x[f[:, 0]], x[f[:, 2]] - x[f[:, 0]])
-    out = np.zeros_like(x)
-    for k in range(3):
-        np.add.at(out, f[:, k], fn)
-    return out
+    corners = f.ravel()  # face by face: each face's normal goes to its three corners
+    return np.stack(
+        [np.bincount(corners, np.repeat(fn[:, d], 3), len(x)) for d in range(3)], axis=1
+    )
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -98,14 +102,31 @@ class NormalJacobian:
             self.block_col[self.transpose_block], np.arange(nv + 1)
         )
 
-    def __call__(self, vertices: np.ndarray) -> sp.bsr_array:
+    @cached_property
+    def ring_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The pattern of ``(∂n/∂X)ᵀ G ∂n/∂X`` over vertices (j, l share a ring): CSR
+        ``indptr``, ``indices``, and :func:`~reconstruct.optimise.kernels.ring_pair_slots`'
+        ``offsets`` and ``slots`` (where each vertex's block pairs land in it)."""
+        nv = self.n_vertices
+        ones = np.ones(self.n_blocks)
+        ring = sp.csr_array((ones, self.block_col, self.indptr), shape=(nv, nv))
+        pairs = (ring.T @ ring).tocsr()
+        pairs.sort_indices()
+        indptr, indices = pairs.indptr.astype(np.int64), pairs.indices.astype(np.int64)
+        offsets, slots = ring_pair_slots(self.indptr, self.block_col, indptr, indices)
+        return indptr, indices, offsets, slots
+
+    def __call__(
+        self, vertices: np.ndarray, normals: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> sp.bsr_array:
+        """∂n/∂X at ``vertices``; ``normals``: their :func:`vertex_normals`, if already known."""
         x = np.asarray(vertices, dtype=float)
         f = self.faces
         a, b, c = x[f[:, 0]], x[f[:, 1]], x[f[:, 2]]
         wrt = np.stack([c - b, a - c, b - a], axis=1)  # (F, 3 wrt, 3)
         vec = np.broadcast_to(wrt[:, None], (len(f), 3, 3, 3)).reshape(-1, 3)
         w = np.stack([np.bincount(self.inverse, vec[:, d], self.n_blocks) for d in range(3)], 1)
-        n, length = vertex_normals(x, f)
+        n, length = vertex_normals(x, f) if normals is None else normals
         inv = np.where(length > 0, 1.0 / np.where(length > 0, length, 1.0), 0.0)
         ni = n[self.block_row]
         blocks = cross_matrices(w) - ni[:, :, None] * np.cross(ni, w)[:, None, :]
