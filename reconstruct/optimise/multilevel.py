@@ -23,7 +23,7 @@ captures those (bench/README.md, solver: what it gains and what it does not).
   ``A R``.
 * Position block (``bumps=None``): the coarse space is every position unknown (each vertex's
   height, or its x, y, z), so ``A_c`` is the whole position block of ``P (JᵀJ + λD) P``, and an
-  algebraic-multigrid V-cycle (pyamg, smoothed aggregation, symmetric Gauss–Seidel: an SPD
+  algebraic-multigrid V-cycle (pyamg, plain aggregation, symmetric Gauss–Seidel: an SPD
   ``A_c⁻¹``) stands in for its inverse. Why: the slow modes of the block-preconditioned
   operator are not smooth on the mesh (they sit on vertices seen by few views), so patch bumps
   miss them; the exact position block takes CG from 45 to 4 iterations, and the V-cycle keeps
@@ -195,7 +195,6 @@ class CoarseOperator:
         scale: np.ndarray,
         directions: np.ndarray | None,
     ):
-        self.lin = lin
         self.multigrid = bumps is None
         p = lin.cost.p
         n = p.n_vertices
