@@ -14,9 +14,9 @@ captures those (bench/README.md, solver: what it gains and what it does not).
   the surface smoothly); per patch one height along the vertices' directions (normal motion)
   or three translations (free motion).
 * Coarse operator: ``A R`` exactly, ``A = P (JᵀJ + λD) P`` (P: mask and directions), assembled
-  from the factored JᵀJ by sparse products (:func:`shape_columns`); ``A_c = Rᵀ A R`` is sparse
-  and factored by LU. Between a rejected step and its retry only λ changes, and ``Rᵀ(λD)R``
-  is added exactly.
+  from the factored JᵀJ vertex by vertex (:func:`shape_columns`); ``A_c = Rᵀ A R`` is sparse
+  and factored by LU. ``Rᵀ(λD)R`` is kept apart, so λ is added exactly; the solver builds the
+  operator once per CG solve and drops it before the trial render (memory).
 * Combination: balancing Neumann–Neumann, ``M⁻¹ = Q + (I − QA) B⁻¹ (I − AQ)`` with
   ``Q = R A_c⁻¹ Rᵀ`` and B⁻¹ the block preconditioner: symmetric positive definite for any SPD
   B⁻¹ and any SPD ``A_c⁻¹`` (no smoother condition), and no product with A beyond the stored
@@ -139,7 +139,7 @@ def shape_columns(lin: Linearisation, shapes: np.ndarray) -> sp.csr_array:
     (N, 3, m), rows [Φᵀx (m·N), α (N·N_b), light], assembled vertex by vertex from the
     factored form (:func:`~reconstruct.optimise.kernels.position_columns`: a vertex's shapes
     move its own x and its ring's normals) on the normal Jacobian's cached 2-ring pattern.
-    Measured at 100k vertices (normal motion): 1.8 s by sparse matrix products, ~0.1 s so."""
+    Measured at 100k vertices (normal motion): 1.8 s by sparse matrix products, 0.3 s so."""
     c = lin.cost
     p = c.p
     n, nb = p.n_vertices, p.n_basis
@@ -252,7 +252,7 @@ class CoarseOperator:
             return splu(matrix).solve
         # Plain aggregation with two symmetric Gauss–Seidel sweeps a side: a quarter of the
         # setup of smoothed aggregation (0.09 against 0.34 s at 100k vertices) for the same
-        # CG iterations; the setup is paid once per linearisation and λ.
+        # CG iterations; the setup is paid once per CG solve.
         sweeps = ("gauss_seidel", {"sweep": "symmetric", "iterations": 2})
         levels = pyamg.smoothed_aggregation_solver(
             matrix.tocsr(),

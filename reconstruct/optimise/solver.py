@@ -269,7 +269,7 @@ def _levenberg_marquardt(
     (operator ``P H P``; the block preconditioner inverts the projected blocks). With
     ``preconditioner: amg`` (and normal motion) or ``two_level`` a coarse correction
     (:mod:`multilevel`: the whole position block by a multigrid V-cycle, or patches by LU)
-    wraps the block one; its ``A R`` is built once per linearisation. ``constrain`` maps a
+    wraps the block one; its ``A R`` is built once per CG solve. ``constrain`` maps a
     trial θ into the feasible set (the vertices' trust regions); the model's prediction is of
     the step taken.
     """
