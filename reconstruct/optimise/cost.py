@@ -606,7 +606,7 @@ class Linearisation:
         # [x, α] rows from u = [x, n, α] rows: x + D_iiᵀ n, and α.
         if isinstance(cu, np.ndarray):
             out = np.empty((n, k - 3, 3))
-            out[:, :3] = cu[:, :3] + np.einsum("nba,nbd->nad", dii, cu[:, 3:6])
+            out[:, :3] = cu[:, :3] + dii.transpose(0, 2, 1) @ cu[:, 3:6]
             out[:, 3:] = cu[:, 6:]
             return out
         lower = np.zeros((n, 3 + k - 6, k))

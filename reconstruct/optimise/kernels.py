@@ -384,6 +384,55 @@ def expand_positions(shapes: np.ndarray, z: np.ndarray) -> np.ndarray:
     return out
 
 
+@njit(parallel=True, cache=True, fastmath=True)
+def coupling_transpose_product(coupling: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """``Σ_i C_iᵀ z_i`` (3,) over the vertices' light couplings ``C`` (N, k, 3): the block
+    preconditioner's light right-hand side, without BLAS's single-threaded (N·k × 3) pass."""
+    n, k = z.shape
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    for i in prange(n):
+        for r in range(k):
+            s0 += coupling[i, r, 0] * z[i, r]
+            s1 += coupling[i, r, 1] * z[i, r]
+            s2 += coupling[i, r, 2] * z[i, r]
+    return np.array([s0, s1, s2])
+
+
+@njit(inline="always", cache=True, fastmath=True)
+def _light_corrected(z: np.ndarray, dinv_c: np.ndarray, light: np.ndarray, i: int, r: int) -> float:
+    """``z[i, r] − (D_i⁻¹ C_i)[r] · δl``."""
+    return z[i, r] - (
+        dinv_c[i, r, 0] * light[0] + dinv_c[i, r, 1] * light[1] + dinv_c[i, r, 2] * light[2]
+    )
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def back_substitute_light(
+    z: np.ndarray,
+    dinv_c: np.ndarray,
+    light: np.ndarray,
+    shapes: np.ndarray,
+    alpha_mask: np.ndarray,
+    out_x: np.ndarray,
+    out_a: np.ndarray,
+) -> None:
+    """``z_i − (D_i⁻¹ C_i) δl`` per vertex, written as x (``shapes[i]`` times its position
+    unknowns) into ``out_x`` (N, 3) and as masked α into ``out_a`` (N, N_b): the block
+    preconditioner's last step and its scatter into θ's layout in one pass (views of θ)."""
+    n, k = z.shape
+    m = shapes.shape[2]
+    for i in prange(n):
+        for a in range(3):
+            acc = 0.0
+            for j in range(m):
+                acc += shapes[i, a, j] * _light_corrected(z, dinv_c, light, i, j)
+            out_x[i, a] = acc
+        for b in range(k - m):
+            out_a[i, b] = _light_corrected(z, dinv_c, light, i, m + b) * alpha_mask[i, b]
+
+
 @njit(parallel=True, cache=True)
 def project_points(
     X: np.ndarray,

@@ -166,7 +166,7 @@ class Problem:
         return slice(0, nx), slice(nx, nx + na), slice(nx + na, nx + na + self.n_light)
 
     def pack(self, X: np.ndarray, A: np.ndarray, light: np.ndarray) -> np.ndarray:
-        return np.concatenate([np.ravel(X), np.ravel(A), np.ravel(light)]).astype(float)
+        return np.concatenate([np.ravel(X), np.ravel(A), np.ravel(light)]).astype(float, copy=False)
 
     def unpack(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         sx, sa, sl = self.slices()

@@ -22,6 +22,8 @@ from threadpoolctl import threadpool_limits
 
 from reconstruct.optimise.cost import JointCost, Linearisation
 from reconstruct.optimise.kernels import (
+    back_substitute_light,
+    coupling_transpose_product,
     damped_block_inverses,
     expand_positions,
     solve_vertex_blocks,
@@ -50,9 +52,10 @@ class SolverSettings:
     # "amg": plus the whole position block, solved by an algebraic-multigrid V-cycle, where
     # vertices move along their normals (CG: 21-45 -> 3-7 iterations at 100k vertices; in
     # free motion the 3N-unknown block costs more to build than CG saves: "block" there).
-    # Not the default: its near-exact steps also move the poorly observed modes that the
-    # block preconditioner's truncated CG leaves alone (bench/README.md: 30 % less CPU at
-    # 100k, but from the same real-size front accuracy +0.9 %, RMSE +1.7 %, light 3.5 -> 6.4 mm).
+    # With "amg" take cg_tolerance 3e-3 (its CG iterations are cheap; 1e-2 left its results
+    # behind block's, 3e-2 far behind). Not the default: from the same fronts it is as
+    # accurate on two scenes and slightly less on two (real size: accuracy +0.8 %); 24 % less
+    # CPU at 100k on the bench scene, but slower on the real-size capture (bench/README.md).
     preconditioner: str = "block"
     coarse_hops: int = 4
     # Keep large freed blocks in the heap during the solve (glibc): −16 % time, +8 % peak RSS
@@ -108,16 +111,13 @@ class ArrowheadPreconditioner:
         vert, light = blocks
         n, nb = p.n_vertices, p.n_basis
         sx, sa, sl = p.slices()
-        # Per vertex the map from the block's unknowns [x or h, α] to [x, α], masked.
-        m = 3 if directions is None else 1
-        basis = np.zeros((n, 3 + nb, m + nb))
-        basis[:, :3, :m] = np.eye(3)[None] if directions is None else directions[:, :, None]
-        basis[:, :3] *= mask[sx].reshape(n, 3, 1)
-        basis[:, 3:, m:] = np.eye(nb) * mask[sa].reshape(n, nb, 1)
-        self.shapes = np.ascontiguousarray(basis[:, :3, :m])  # x = shapes · (x or h)
+        # Per vertex the map from the block's position unknowns (x or h) to x, masked.
+        raw = np.eye(3)[None] if directions is None else directions[:, :, None]
+        self.shapes = np.ascontiguousarray(raw * mask[sx].reshape(n, 3, 1))
+        m = self.shapes.shape[2]
         dv = np.concatenate([scale[sx].reshape(n, 3), scale[sa].reshape(n, nb)], axis=1)
-        alpha_mask = mask[sa].reshape(n, nb).astype(float)
-        self.vert = damped_block_inverses(vert, lam * dv, self.shapes, alpha_mask)
+        self.alpha_mask = mask[sa].reshape(n, nb).astype(float)
+        self.vert = damped_block_inverses(vert, lam * dv, self.shapes, self.alpha_mask)
         ml = mask[sl]
         dense = np.zeros((p.n_light, p.n_light))
         for j in range(light.shape[0]):
@@ -129,13 +129,16 @@ class ArrowheadPreconditioner:
         if isinstance(coupling, np.ndarray):  # shared offset: dense (N, k, 3)
             # basisᵀ C without the (N, k, 3 + N_b) product: shapesᵀ on x, the α mask on α
             reduced = np.empty((n, k, 3))
-            reduced[:, :m] = np.einsum("nam,nad->nmd", basis[:, :3, :m], coupling[:, :3])
+            reduced[:, :m] = self.shapes.transpose(0, 2, 1) @ coupling[:, :3]
             reduced[:, m:] = coupling[:, 3:] * mask[sa].reshape(n, nb, 1)
             coupling = reduced * ml[None, None, :]
             self.coupling: np.ndarray | sp.csr_array = coupling.reshape(n * k, 3)
             self.dinv_c: np.ndarray | sp.csr_array = (self.vert @ coupling).reshape(n * k, 3)
             schur = dense - self.coupling.T @ self.dinv_c
-        else:
+        else:  # per vertex the map from [x or h, α] to [x, α]
+            basis = np.zeros((n, 3 + nb, k))
+            basis[:, :3, :m] = self.shapes
+            basis[:, 3:, m:] = np.eye(nb) * self.alpha_mask[:, :, None]
             reduce = sp.bsr_array(
                 (basis.transpose(0, 2, 1), np.arange(n), np.arange(n + 1)),
                 shape=(n * k, n * (3 + nb)),
@@ -157,6 +160,22 @@ class ArrowheadPreconditioner:
         n, nb = p.n_vertices, p.n_basis
         sx, sa, sl = p.slices()
         zu = solve_vertex_blocks(self.vert, self.shapes, v[sx].reshape(n, 3), v[sa].reshape(n, nb))
+        if isinstance(self.dinv_c, np.ndarray):  # shared light: dense couplings, compiled
+            k = zu.shape[1]
+            coupling = self.coupling.reshape(n, k, 3)
+            zl = self.schur_inv @ (v[sl] - coupling_transpose_product(coupling, zu))
+            out = np.empty_like(v)
+            back_substitute_light(
+                zu,
+                self.dinv_c.reshape(n, k, 3),
+                zl,
+                self.shapes,
+                self.alpha_mask,
+                out[sx].reshape(n, 3),
+                out[sa].reshape(n, nb),
+            )
+            out[sl] = zl * self.mask[sl]
+            return out
         zl = self.schur_inv @ (v[sl] - self.coupling.T @ zu.ravel())
         zu -= (self.dinv_c @ zl).reshape(zu.shape)
         zx = expand_positions(self.shapes, zu)

@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 from reconstruct.optimise.kernels import (
+    back_substitute_light,
+    coupling_transpose_product,
     damped_block_inverses,
     expand_positions,
     rendered_error,
@@ -54,6 +56,26 @@ def test_vertex_block_solve_and_expansion_match_the_dense_products() -> None:
     u = np.concatenate([np.einsum("nam,na->nm", shapes, vx), va], axis=1)
     assert np.allclose(z, np.einsum("nij,nj->ni", inverse, u))
     assert np.allclose(expand_positions(shapes, z), np.einsum("nam,nm->na", shapes, z[:, :m]))
+
+
+@pytest.mark.parametrize("m", [1, 3])
+def test_light_elimination_matches_the_dense_products(m: int) -> None:
+    rng = np.random.default_rng(9)
+    n, nb = 6, 4
+    k = m + nb
+    coupling, dinv_c = rng.normal(size=(n, k, 3)), rng.normal(size=(n, k, 3))
+    z, light = rng.normal(size=(n, k)), rng.normal(size=3)
+    shapes = rng.normal(size=(n, 3, m))
+    alpha_mask = (rng.random((n, nb)) > 0.3).astype(float)
+    assert np.allclose(
+        coupling_transpose_product(coupling, z), coupling.reshape(-1, 3).T @ z.ravel()
+    )
+    theta = np.full(3 * n + nb * n, np.nan)  # the kernel writes into views of it
+    out_x, out_a = theta[: 3 * n].reshape(n, 3), theta[3 * n :].reshape(n, nb)
+    back_substitute_light(z, dinv_c, light, shapes, alpha_mask, out_x, out_a)
+    corrected = z - dinv_c @ light
+    assert np.allclose(theta[: 3 * n], np.einsum("nam,nm->na", shapes, corrected[:, :m]).ravel())
+    assert np.allclose(theta[3 * n :], (corrected[:, m:] * alpha_mask).ravel())
 
 
 def test_rendered_error_is_shading_times_colour_minus_observed() -> None:
