@@ -424,11 +424,17 @@ def back_substitute_light(
     n, k = z.shape
     m = shapes.shape[2]
     for i in prange(n):
-        for a in range(3):
-            acc = 0.0
-            for j in range(m):
-                acc += shapes[i, a, j] * _light_corrected(z, dinv_c, light, i, j)
-            out_x[i, a] = acc
+        x0 = 0.0
+        x1 = 0.0
+        x2 = 0.0
+        for j in range(m):  # each position unknown corrected once, then spread over x, y, z
+            zj = _light_corrected(z, dinv_c, light, i, j)
+            x0 += shapes[i, 0, j] * zj
+            x1 += shapes[i, 1, j] * zj
+            x2 += shapes[i, 2, j] * zj
+        out_x[i, 0] = x0
+        out_x[i, 1] = x1
+        out_x[i, 2] = x2
         for b in range(k - m):
             out_a[i, b] = _light_corrected(z, dinv_c, light, i, m + b) * alpha_mask[i, b]
 

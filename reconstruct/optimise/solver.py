@@ -130,7 +130,7 @@ class ArrowheadPreconditioner:
             # basisᵀ C without the (N, k, 3 + N_b) product: shapesᵀ on x, the α mask on α
             reduced = np.empty((n, k, 3))
             reduced[:, :m] = self.shapes.transpose(0, 2, 1) @ coupling[:, :3]
-            reduced[:, m:] = coupling[:, 3:] * mask[sa].reshape(n, nb, 1)
+            reduced[:, m:] = coupling[:, 3:] * self.alpha_mask[:, :, None]
             coupling = reduced * ml[None, None, :]
             self.coupling: np.ndarray | sp.csr_array = coupling.reshape(n * k, 3)
             self.dinv_c: np.ndarray | sp.csr_array = (self.vert @ coupling).reshape(n * k, 3)
