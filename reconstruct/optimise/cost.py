@@ -34,10 +34,11 @@ from reconstruct.optimise.kernels import (
     accumulate_normal_equations,
     gram_products,
     lower_products,
-    position_diagonal_blocks,
     project_points,
     rendered_error,
     sample_bilinear,
+    shading_gradients,
+    vertex_diagonal_blocks,
 )
 from reconstruct.optimise.mesh import NormalJacobian, adjacency, vertex_normals
 from reconstruct.optimise.problem import Problem
@@ -201,9 +202,7 @@ class JointCost:
         p, o = self.p, self.p.obs
         P = p.light_positions(light)
         pv = self.pair_vertex
-        xp, npair = X[pv], normals[pv]
-        d = P[self.pair_view] - xp
-        s_pair = shading(xp, npair, P[self.pair_view])
+        s_pair = shading(X[pv], normals[pv], P[self.pair_view])
         refl = A @ self.B.T
         unit = np.ones(p.n_vertices)
         colours = np.stack([render_values(refl, unit, resp) for resp in p.rig.responses])
@@ -214,14 +213,9 @@ class JointCost:
         error = rendered_error(colours, s_pair, self.obs_pair, o.vertex, o.illumination, y_obs)
         state = RenderState(colours, error, s_pair, image_grad=image_grad, proj_jac=duv)
         if derivatives:
-            dist = np.linalg.norm(d, axis=1)
-            dot = np.einsum("ij,ij->i", d, npair)
-            lit = (s_pair > 0)[:, None]
-            inv3 = 1.0 / dist**3
-            state.g = np.where(
-                lit, npair * inv3[:, None] - 3.0 * (dot * inv3 / dist**2)[:, None] * d, 0.0
+            state.g, state.h = shading_gradients(
+                np.ascontiguousarray(X), normals, P, pv, self.pair_view, s_pair
             )
-            state.h = np.where(lit, d * inv3[:, None], 0.0)
         return state
 
     def _sample(
@@ -486,29 +480,34 @@ class Linearisation:
     coupling: np.ndarray | sp.csr_array  # u × light: (N, k, 3) shared offset; sparse (N·k, 3V)
     light_block: np.ndarray  # light × light, (n_light/3, 3, 3)
     light_grad: np.ndarray  # (n_light/3, 3)
-    dn: sp.csr_array | None = field(init=False)  # None: positions fixed (see linearise)
-    jg: sp.csr_array | None = field(init=False)
+    # the normal Jacobian's and the geometric term's blocks column by column, for the
+    # transposed products (empty: positions fixed, see linearise)
+    dn_t_blocks: np.ndarray = field(init=False)
+    jg_t_blocks: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
-        dn = self.geometry.dn
-        self.dn = None if dn is None else dn.tocsr()
-        self.jg = self.geometry.jg
+        geo, order = self.geometry, self.cost.normal_jacobian.transpose_block
+        self.dn_t_blocks = _NO_BLOCKS if geo.dn is None else np.take(geo.dn.data, order, axis=0)
+        self.jg_t_blocks = (
+            _NO_GEOMETRIC if geo.jg_blocks is None else np.take(geo.jg_blocks, order, axis=0)
+        )
 
     def _lower(self, yu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``liftᵀ``: (N, k, …) over u to x (N, 3, …) and α (N, N_b, …)."""
-        if self.dn is None:
+        """``liftᵀ`` of one vector over u (N, k): x ``δx + Σ_i D_ijᵀ δn_i`` (N, 3) and α."""
+        if self.geometry.dn is None:
             return yu[:, :3], yu[:, 6:]
-        tail = yu.shape[2:]
-        back = self.dn.T @ yu[:, 3:6].reshape(3 * len(yu), -1)
-        gx = yu[:, :3] + back.reshape(len(yu), 3, *tail)
-        return gx, yu[:, 6:]
+        nj = self.cost.normal_jacobian
+        per_block = np.einsum("tab,ta->tb", self.dn_t_blocks, yu[nj.transpose_row, 3:6])
+        # every vertex has its own (diagonal) block, so no column's range is empty
+        back = np.add.reduceat(per_block, nj.transpose_indptr[:-1], axis=0)
+        return yu[:, :3] + back, yu[:, 6:]
 
     def gradient(self) -> np.ndarray:
         """Jᵀr (half the gradient of E)."""
         c = self.cost
         gx, ga = self._lower(self.grad_u)
-        if self.jg is not None:
-            gx = gx + (self.jg.T @ self.geometry.rg).reshape(-1, 3)
+        if self.geometry.jg is not None:
+            gx = gx + (self.geometry.jg.T @ self.geometry.rg).reshape(-1, 3)
         ga = ga + c.gamma[0] * self.A @ c.SS + (c.laplacian @ self.A) @ c.BB
         return c.p.pack(gx, ga, self.light_grad)
 
@@ -543,11 +542,11 @@ class Linearisation:
             dX,
             dA,
             nj.transpose_indptr,
-            nj.transpose_block,
-            nj.block_row,
+            nj.transpose_row,
+            self.dn_t_blocks,
+            self.jg_t_blocks,
             nj.block_col,
             nj.indptr,
-            dn_blocks,
             _NO_GEOMETRIC if geo.jg_blocks is None else geo.jg_blocks,
             lap.indptr,
             lap.indices,
@@ -560,30 +559,17 @@ class Linearisation:
     def diagonal_blocks(self) -> tuple[np.ndarray, np.ndarray]:
         """Exact diagonal blocks of JᵀJ: per vertex over [x (3), α (N_b)] and per light block
         (3×3) — the preconditioner and the Marquardt scaling."""
-        c = self.cost
-        n, nb = c.p.n_vertices, c.p.n_basis
-        G = self.gram
-        blk = np.zeros((n, 3 + nb, 3 + nb))
-        blk[:, :3, :3] = G[:, :3, :3]
-        blk[:, :3, 3:] = G[:, :3, 6:]
-        blk[:, 3:, :3] = G[:, 6:, :3]
-        blk[:, 3:, 3:] = G[:, 6:, 6:] + c.gamma[0] * c.SS + c.lap_diag[:, None, None] * c.BB
-        dn = self.geometry.dn
-        if dn is None or self.geometry.jg_blocks is None:  # positions fixed
-            return blk, self.light_block.copy()
-        nj = c.normal_jacobian
-        xx, xa = position_diagonal_blocks(
-            G,
-            dn.data,
-            self.geometry.jg_blocks,
-            nj.block_row,
-            nj.block_col,
+        c, nj = self.cost, self.cost.normal_jacobian
+        blk = vertex_diagonal_blocks(
+            self.gram,
+            c.gamma[0] * c.SS,
+            c.lap_diag,
+            c.BB,
+            self.dn_t_blocks,
+            self.jg_t_blocks,
             nj.transpose_indptr,
-            nj.transpose_block,
+            nj.transpose_row,
         )
-        blk[:, :3, :3] += xx
-        blk[:, :3, 3:] += xa
-        blk[:, 3:, :3] += xa.transpose(0, 2, 1)
         return blk, self.light_block.copy()
 
     def light_coupling(self) -> np.ndarray | sp.csr_array:

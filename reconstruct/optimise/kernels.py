@@ -1,7 +1,8 @@
-"""Compiled per-observation loops of the joint cost: bilinear image samples and the
-Gauss–Newton accumulation of :meth:`~reconstruct.optimise.cost.JointCost.linearise`.
+"""Compiled loops of the joint cost and its solver: bilinear image samples, the Gauss–Newton
+accumulation of :meth:`~reconstruct.optimise.cost.JointCost.linearise`, the normals and
+their Jacobian, the products with JᵀJ and its preconditioners, and CG's vector updates.
 
-Both walk millions of observations. In NumPy each intermediate quantity was a separate
+The first two walk millions of observations. In NumPy each intermediate quantity was a separate
 (observations × ·) array, written and read back once per pass (at 100k vertices ~2M
 observations, a dozen passes per linearisation); here one loop per vertex reads each
 observation once and keeps its sums in registers, and the vertices run in parallel. The
@@ -281,11 +282,11 @@ def lower_products(
     dX: np.ndarray,
     dA: np.ndarray,
     dn_t_indptr: np.ndarray,
-    dn_t_block: np.ndarray,
-    dn_row: np.ndarray,
+    dn_t_row: np.ndarray,
+    dn_t_blocks: np.ndarray,
+    jg_t_blocks: np.ndarray,
     dn_col: np.ndarray,
     dn_indptr: np.ndarray,
-    dn_blocks: np.ndarray,
     jg_blocks: np.ndarray,
     lap_indptr: np.ndarray,
     lap_col: np.ndarray,
@@ -296,11 +297,15 @@ def lower_products(
     """Second half of ``Linearisation.matvec``: back from u to [x, α]:
     ``x_j = yu_j[:3] + Σ_i D_ijᵀ yu_i[3:6] + Σ_i J_g(i, j)ᵀ (J_g δx)_i`` and
     ``α_j = yu_j[6:] + δα_j S + (L δα)_j Bᵀ B`` (S = γ1 R_sᵀR_s, ``photometric`` = R_bᵀR_b).
-    The transpose runs over column j's blocks ``dn_t_block[dn_t_indptr[j]:…]``, so every vertex
-    writes only its own rows; ``jg_blocks`` (blocks, 3) share the normal Jacobian's sparsity."""
+    The transpose runs over copies of the blocks stored column by column (``dn_t_*``,
+    ``jg_t_blocks``: the transpose's CSR), so every vertex writes only its own rows and reads
+    its blocks in sequence (gathering them by index from the row-ordered arrays made this
+    product memory-latency bound: 61 → 36 ms on one core at 100k); ``jg_blocks`` (blocks, 3),
+    in row order, share the normal Jacobian's sparsity. Empty ``dn_t_blocks``: positions
+    fixed."""
     n, k = yu.shape
     nb = dA.shape[1]
-    with_normals = dn_blocks.shape[0] > 0
+    with_normals = dn_t_blocks.shape[0] > 0
     with_geometric = jg_blocks.shape[0] > 0
     jdx = np.zeros(n)
     if with_geometric:
@@ -319,17 +324,16 @@ def lower_products(
             ox[j, d] = yu[j, d]
         if with_normals:
             for t in range(dn_t_indptr[j], dn_t_indptr[j + 1]):
-                b = dn_t_block[t]
-                i = dn_row[b]
+                i = dn_t_row[t]
                 for d in range(3):
                     ox[j, d] += (
-                        dn_blocks[b, 0, d] * yu[i, 3]
-                        + dn_blocks[b, 1, d] * yu[i, 4]
-                        + dn_blocks[b, 2, d] * yu[i, 5]
+                        dn_t_blocks[t, 0, d] * yu[i, 3]
+                        + dn_t_blocks[t, 1, d] * yu[i, 4]
+                        + dn_t_blocks[t, 2, d] * yu[i, 5]
                     )
                 if with_geometric:
                     for d in range(3):
-                        ox[j, d] += jg_blocks[b, d] * jdx[i]
+                        ox[j, d] += jg_t_blocks[t, d] * jdx[i]
         la = lap_a[j]
         for t in range(lap_indptr[j], lap_indptr[j + 1]):
             m = lap_col[t]
@@ -565,52 +569,71 @@ def damped_block_inverses(
 
 
 @njit(parallel=True, cache=True, fastmath=True)
-def position_diagonal_blocks(
+def vertex_diagonal_blocks(
     gram: np.ndarray,
+    spectral: np.ndarray,
+    lap_diag: np.ndarray,
+    photometric: np.ndarray,
     dn_blocks: np.ndarray,
     geometric: np.ndarray,
-    block_row: np.ndarray,
-    block_col: np.ndarray,
     transpose_indptr: np.ndarray,
-    transpose_block: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """What the normals and the geometric term add to the diagonal blocks of JᵀJ, per vertex
-    j: the x×x part ``Σ_i D_ijᵀ G_nn(i) D_ij + J_g(i, j)ᵀ J_g(i, j)`` plus, from its own
-    normal, ``G_xn D_jj + (G_xn D_jj)ᵀ`` (N, 3, 3), and the x×α part ``D_jjᵀ G_nα`` (N, 3, N_b).
-    ``gram`` (N, k, k) over u = [x, n, α]; ``dn_blocks`` D (blocks, 3, 3) and ``geometric``
-    (blocks, 3) on the normal Jacobian's sparsity, read column by column."""
+    transpose_row: np.ndarray,
+) -> np.ndarray:
+    """The diagonal blocks of JᵀJ per vertex j over [x (3), α (N_b)] (N, 3+N_b, 3+N_b):
+    ``gram``'s [x, α] rows and columns, the smoothness terms' α×α part ``S + L_jj Bᵀ B``
+    (``spectral`` S = γ1 R_sᵀR_s, ``photometric`` = R_bᵀR_b), and what the normals and the
+    geometric term add: x×x ``Σ_i D_ijᵀ G_nn(i) D_ij + J_g(i, j)ᵀ J_g(i, j)`` plus, from its own
+    normal, ``G_xn D_jj + (G_xn D_jj)ᵀ``, and x×α ``D_jjᵀ G_nα``. ``gram`` (N, k, k) over
+    u = [x, n, α]; ``dn_blocks`` D (blocks, 3, 3) and ``geometric`` (blocks, 3) on the normal
+    Jacobian's sparsity, stored column by column (the transpose's CSR: ``transpose_indptr``,
+    rows ``transpose_row``); empty ``dn_blocks``: positions fixed. One pass: NumPy's slice
+    copies and sums took 300 ms at 100k, this 80."""
     n, k = gram.shape[0], gram.shape[1]
     nb = k - 6
-    xx = np.zeros((n, 3, 3))
-    xa = np.zeros((n, 3, nb))
+    with_normals = dn_blocks.shape[0] > 0
+    out = np.empty((n, 3 + nb, 3 + nb))
     for j in prange(n):
+        o = out[j]
+        for r in range(3):
+            for q in range(3):
+                o[r, q] = gram[j, r, q]
+            for a in range(nb):
+                o[r, 3 + a] = gram[j, r, 6 + a]
+                o[3 + a, r] = gram[j, 6 + a, r]
+        for a in range(nb):
+            for b in range(nb):
+                o[3 + a, 3 + b] = (
+                    gram[j, 6 + a, 6 + b] + spectral[a, b] + lap_diag[j] * photometric[a, b]
+                )
+        if not with_normals:
+            continue
         for t in range(transpose_indptr[j], transpose_indptr[j + 1]):
-            b = transpose_block[t]
-            i = block_row[b]
+            i = transpose_row[t]
             for r in range(3):
                 for q in range(3):
-                    acc = geometric[b, r] * geometric[b, q]
+                    acc = geometric[t, r] * geometric[t, q]
                     for u in range(3):
                         gd = 0.0
                         for v in range(3):
-                            gd += gram[i, 3 + u, 3 + v] * dn_blocks[b, v, q]
-                        acc += dn_blocks[b, u, r] * gd
-                    xx[j, r, q] += acc
-            if i != block_col[b]:
+                            gd += gram[i, 3 + u, 3 + v] * dn_blocks[t, v, q]
+                        acc += dn_blocks[t, u, r] * gd
+                    o[r, q] += acc
+            if i != j:
                 continue
             for r in range(3):
                 for q in range(3):
                     cross = 0.0
                     for u in range(3):
-                        cross += gram[j, r, 3 + u] * dn_blocks[b, u, q]
-                    xx[j, r, q] += cross
-                    xx[j, q, r] += cross
+                        cross += gram[j, r, 3 + u] * dn_blocks[t, u, q]
+                    o[r, q] += cross
+                    o[q, r] += cross
                 for a in range(nb):
                     acc = 0.0
                     for u in range(3):
-                        acc += dn_blocks[b, u, r] * gram[j, 3 + u, 6 + a]
-                    xa[j, r, a] = acc
-    return xx, xa
+                        acc += dn_blocks[t, u, r] * gram[j, 3 + u, 6 + a]
+                    o[r, 3 + a] += acc
+                    o[3 + a, r] += acc
+    return out
 
 
 @njit(parallel=True, cache=True)
@@ -720,3 +743,132 @@ def position_columns(
                             acc += U[c, s, p] * Y[t, s, q]
                         hh[slot, p, q] += acc
     return hh, ah, light
+
+
+@njit(cache=True)
+def face_normal_sums(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``ñ_i`` (N, 3): each face's (twice-area) normal added to its three corners, face by
+    face (the order NumPy's per-component ``bincount`` summed in; one pass instead of three)."""
+    out = np.zeros((x.shape[0], 3))
+    for f in range(faces.shape[0]):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        e0, e1, e2 = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
+        g0, g1, g2 = x[c, 0] - x[a, 0], x[c, 1] - x[a, 1], x[c, 2] - x[a, 2]
+        n0, n1, n2 = e1 * g2 - e2 * g1, e2 * g0 - e0 * g2, e0 * g1 - e1 * g0
+        for v in (a, b, c):
+            out[v, 0] += n0
+            out[v, 1] += n1
+            out[v, 2] += n2
+    return out
+
+
+@njit(parallel=True, cache=True)
+def normal_jacobian_blocks(
+    x: np.ndarray,
+    faces: np.ndarray,
+    inverse: np.ndarray,
+    n_blocks: int,
+    block_row: np.ndarray,
+    normals: np.ndarray,
+    inverse_length: np.ndarray,
+) -> np.ndarray:
+    """The blocks of ``∂n/∂X`` (see ``mesh.NormalJacobian``): per face the edge vector
+    ``w`` of each (corner i, corner j) pair summed into block ``inverse[9f + 3i + j]``
+    (serial: faces share blocks), then ``([w]_× − n (n × w)ᵀ) / |ñ|`` per block."""
+    w = np.zeros((n_blocks, 3))
+    for f in range(faces.shape[0]):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        for j in range(3):  # ∂N/∂x_j = [x_p − x_q]_×: (c, b) for a, (a, c) for b, (b, a) for c
+            p, q = (c, b) if j == 0 else ((a, c) if j == 1 else (b, a))
+            for i in range(3):
+                blk = inverse[9 * f + 3 * i + j]
+                for d in range(3):
+                    w[blk, d] += x[p, d] - x[q, d]
+    out = np.empty((n_blocks, 3, 3))
+    for t in prange(n_blocks):
+        r = block_row[t]
+        n0, n1, n2 = normals[r, 0], normals[r, 1], normals[r, 2]
+        w0, w1, w2 = w[t, 0], w[t, 1], w[t, 2]
+        c0, c1, c2 = n1 * w2 - n2 * w1, n2 * w0 - n0 * w2, n0 * w1 - n1 * w0  # n × w
+        s = inverse_length[r]
+        out[t, 0, 0] = (0.0 - n0 * c0) * s
+        out[t, 0, 1] = (-w2 - n0 * c1) * s
+        out[t, 0, 2] = (w1 - n0 * c2) * s
+        out[t, 1, 0] = (w2 - n1 * c0) * s
+        out[t, 1, 1] = (0.0 - n1 * c1) * s
+        out[t, 1, 2] = (-w0 - n1 * c2) * s
+        out[t, 2, 0] = (-w1 - n2 * c0) * s
+        out[t, 2, 1] = (w0 - n2 * c1) * s
+        out[t, 2, 2] = (0.0 - n2 * c2) * s
+    return out
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def cg_step(x: np.ndarray, r: np.ndarray, d: np.ndarray, q: np.ndarray, step: float) -> float:
+    """CG's update ``x += step d``, ``r −= step q`` in place, in one pass; returns |r|²
+    (NumPy: four passes and two temporaries of the ~1M-entry vectors at 100k vertices)."""
+    acc = 0.0
+    for i in prange(x.shape[0]):
+        x[i] += step * d[i]
+        ri = r[i] - step * q[i]
+        r[i] = ri
+        acc += ri * ri
+    return acc
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def cg_direction(d: np.ndarray, z: np.ndarray, beta: float) -> None:
+    """CG's next search direction ``d = z + β d``, in place."""
+    for i in prange(d.shape[0]):
+        d[i] = z[i] + beta * d[i]
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def project_to_stage(
+    v: np.ndarray, damping: np.ndarray, step: np.ndarray, mask: np.ndarray, directions: np.ndarray
+) -> None:
+    """In place: ``v = P (v + damping ⊙ step)`` with P the stage's projection — the mask, then
+    each vertex's position (θ's first 3N entries) onto its direction ``d dᵀ`` (``directions``
+    (N, 3); empty: free motion). Empty ``damping``: no damping term."""
+    damped = damping.shape[0] > 0
+    for i in prange(v.shape[0]):
+        vi = v[i] + damping[i] * step[i] if damped else v[i]
+        v[i] = vi if mask[i] else 0.0
+    for i in prange(directions.shape[0]):
+        s = v[3 * i] * directions[i, 0] + v[3 * i + 1] * directions[i, 1]
+        s += v[3 * i + 2] * directions[i, 2]
+        for a in range(3):
+            v[3 * i + a] = directions[i, a] * s
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def shading_gradients(
+    x: np.ndarray,
+    normals: np.ndarray,
+    lights: np.ndarray,
+    pair_vertex: np.ndarray,
+    pair_view: np.ndarray,
+    pair_s: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The derivatives of the shading ``s = (p − x)·n / |p − x|³`` (``forward.shading``) per
+    (vertex, view) pair: ``g = ∂s/∂p = n/|d|³ − 3 (d·n) d/|d|⁵`` (= −∂s/∂x with n fixed) and
+    ``h = ∂s/∂n = d/|d|³`` with d = p − x, zero where the pair is unlit (``pair_s`` ≤ 0).
+    One pass instead of a dozen NumPy temporaries of (pairs × 3)."""
+    m = pair_vertex.shape[0]
+    g = np.empty((m, 3))
+    h = np.empty((m, 3))
+    for t in prange(m):
+        if not pair_s[t] > 0.0:
+            for a in range(3):
+                g[t, a] = 0.0
+                h[t, a] = 0.0
+            continue
+        i, c = pair_vertex[t], pair_view[t]
+        d0, d1, d2 = lights[c, 0] - x[i, 0], lights[c, 1] - x[i, 1], lights[c, 2] - x[i, 2]
+        n0, n1, n2 = normals[i, 0], normals[i, 1], normals[i, 2]
+        dist2 = d0 * d0 + d1 * d1 + d2 * d2
+        inv3 = 1.0 / (dist2 * np.sqrt(dist2))
+        k = 3.0 * (d0 * n0 + d1 * n1 + d2 * n2) * inv3 / dist2
+        g[t, 0], g[t, 1], g[t, 2] = n0 * inv3 - k * d0, n1 * inv3 - k * d1, n2 * inv3 - k * d2
+        h[t, 0], h[t, 1], h[t, 2] = d0 * inv3, d1 * inv3, d2 * inv3
+    return g, h

@@ -15,20 +15,7 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from reconstruct.optimise.kernels import ring_pair_slots
-
-
-def cross_matrices(u: np.ndarray) -> np.ndarray:
-    """``[u]_×`` for each row of ``u`` (M, 3) -> (M, 3, 3), so that ``[u]_× w = u × w``."""
-    z = np.zeros(len(u))
-    return np.stack(
-        [
-            np.stack([z, -u[:, 2], u[:, 1]], axis=1),
-            np.stack([u[:, 2], z, -u[:, 0]], axis=1),
-            np.stack([-u[:, 1], u[:, 0], z], axis=1),
-        ],
-        axis=1,
-    )
+from reconstruct.optimise.kernels import face_normal_sums, normal_jacobian_blocks, ring_pair_slots
 
 
 def adjacency(faces: np.ndarray, n_vertices: int) -> sp.csr_array:
@@ -52,13 +39,8 @@ def edges(adj: sp.csr_array) -> np.ndarray:
 
 def unnormalised_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """``ñ_i``: sum of the (twice-area) face normals around each vertex, (N, 3)."""
-    x = np.asarray(vertices, dtype=float)
-    f = np.asarray(faces, dtype=np.int64)
-    fn = np.cross(x[f[:, 1]] - x[f[:, 0]], x[f[:, 2]] - x[f[:, 0]])
-    corners = f.ravel()  # face by face: each face's normal goes to its three corners
-    return np.stack(
-        [np.bincount(corners, np.repeat(fn[:, d], 3), len(x)) for d in range(3)], axis=1
-    )
+    x = np.ascontiguousarray(vertices, dtype=float)
+    return face_normal_sums(x, np.ascontiguousarray(faces, dtype=np.int64))
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -101,6 +83,7 @@ class NormalJacobian:
         self.transpose_indptr = np.searchsorted(
             self.block_col[self.transpose_block], np.arange(nv + 1)
         )
+        self.transpose_row = self.block_row[self.transpose_block]
 
     @cached_property
     def ring_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -120,17 +103,12 @@ class NormalJacobian:
         self, vertices: np.ndarray, normals: tuple[np.ndarray, np.ndarray] | None = None
     ) -> sp.bsr_array:
         """∂n/∂X at ``vertices``; ``normals``: their :func:`vertex_normals`, if already known."""
-        x = np.asarray(vertices, dtype=float)
-        f = self.faces
-        a, b, c = x[f[:, 0]], x[f[:, 1]], x[f[:, 2]]
-        wrt = np.stack([c - b, a - c, b - a], axis=1)  # (F, 3 wrt, 3)
-        vec = np.broadcast_to(wrt[:, None], (len(f), 3, 3, 3)).reshape(-1, 3)
-        w = np.stack([np.bincount(self.inverse, vec[:, d], self.n_blocks) for d in range(3)], 1)
-        n, length = vertex_normals(x, f) if normals is None else normals
+        x = np.ascontiguousarray(vertices, dtype=float)
+        n, length = vertex_normals(x, self.faces) if normals is None else normals
         inv = np.where(length > 0, 1.0 / np.where(length > 0, length, 1.0), 0.0)
-        ni = n[self.block_row]
-        blocks = cross_matrices(w) - ni[:, :, None] * np.cross(ni, w)[:, None, :]
-        blocks *= inv[self.block_row][:, None, None]
+        blocks = normal_jacobian_blocks(
+            x, self.faces, self.inverse, self.n_blocks, self.block_row, n, inv
+        )
         nv = self.n_vertices
         return sp.bsr_array(
             (blocks, self.block_col, self.indptr), shape=(3 * nv, 3 * nv), blocksize=(3, 3)

@@ -23,14 +23,19 @@ from threadpoolctl import threadpool_limits
 from reconstruct.optimise.cost import JointCost, Linearisation
 from reconstruct.optimise.kernels import (
     back_substitute_light,
+    cg_direction,
+    cg_step,
     coupling_transpose_product,
     damped_block_inverses,
     expand_positions,
+    project_to_stage,
     solve_vertex_blocks,
 )
 from reconstruct.optimise.multilevel import CoarseOperator, patch_bumps
 
 PRECONDITIONERS = ("block", "two_level", "amg")
+_NO_DIRECTIONS = np.empty((0, 3))  # free motion
+_NO_DAMPING = np.empty(0)
 
 
 @dataclass
@@ -201,13 +206,11 @@ def _pcg(
         if dq <= 0:
             return x, k
         step = rz / dq
-        x += step * d
-        r -= step * q
-        if np.linalg.norm(r) <= target:
+        if np.sqrt(cg_step(x, r, d, q, step)) <= target:
             return x, k
         z = precond(r)
         rz_new = float(r @ z)
-        d = z + (rz_new / rz) * d
+        cg_direction(d, z, rz_new / rz)
         rz = rz_new
     return x, max_iter
 
@@ -296,13 +299,13 @@ def _levenberg_marquardt(
     if cfg.preconditioner not in PRECONDITIONERS:
         raise ValueError(f"preconditioner {cfg.preconditioner!r}: use one of {PRECONDITIONERS}")
     theta = np.array(theta, dtype=float)
+    mask = np.ascontiguousarray(mask, dtype=bool)
     sx = cost.p.slices()[0]
+    along = _NO_DIRECTIONS if directions is None else np.ascontiguousarray(directions, dtype=float)
 
     def project(v: np.ndarray) -> np.ndarray:
-        out = v * mask
-        if directions is not None:
-            d = out[sx].reshape(-1, 3)
-            out[sx] = (directions * np.einsum("ij,ij->i", d, directions)[:, None]).ravel()
+        out = np.array(v, dtype=float)
+        project_to_stage(out, _NO_DAMPING, _NO_DAMPING, mask, along)
         return out
 
     positions = bool(mask[sx].any())  # else the position derivatives are left out
@@ -335,9 +338,11 @@ def _levenberg_marquardt(
         # CG's vectors stay in the stage's subspace (its right-hand side and the
         # preconditioner's output are projected), so only the product leaves it.
         def op(
-            v: np.ndarray, lin: Linearisation = lin, lam: float = lam, scale: np.ndarray = scale
+            v: np.ndarray, lin: Linearisation = lin, damping: np.ndarray = lam * scale
         ) -> np.ndarray:
-            return project(lin.matvec(v) + lam * scale * v)
+            out = lin.matvec(v)
+            project_to_stage(out, damping, v, mask, along)
+            return out
 
         precondition: Callable[[np.ndarray], np.ndarray] = pre
         if coarse_space:  # A R once per CG solve

@@ -1,4 +1,4 @@
-"""The compiled preconditioner and render kernels against their plain NumPy definitions."""
+"""The compiled preconditioner, render and CG kernels against their plain NumPy definitions."""
 
 from __future__ import annotations
 
@@ -7,9 +7,12 @@ import pytest
 
 from reconstruct.optimise.kernels import (
     back_substitute_light,
+    cg_direction,
+    cg_step,
     coupling_transpose_product,
     damped_block_inverses,
     expand_positions,
+    project_to_stage,
     rendered_error,
     solve_vertex_blocks,
 )
@@ -89,3 +92,37 @@ def test_rendered_error_is_shading_times_colour_minus_observed() -> None:
     error = rendered_error(colours, pair_shading, obs_pair, vertex, illumination, observed)
     s, colour = pair_shading[obs_pair], colours[illumination, vertex]
     assert np.allclose(error, s[:, None] * colour - observed, rtol=1e-14, atol=1e-15)
+
+
+def test_cg_updates_match_their_vector_definitions() -> None:
+    rng = np.random.default_rng(11)
+    x, r, d, q, z = rng.normal(size=(5, 40))
+    x0, r0, d0 = x.copy(), r.copy(), d.copy()
+    squared = cg_step(x, r, d, q, 0.7)
+    assert np.allclose(x, x0 + 0.7 * d0) and np.allclose(r, r0 - 0.7 * q)
+    assert np.isclose(squared, r @ r)
+    cg_direction(d, z, 0.3)
+    assert np.allclose(d, z + 0.3 * d0)
+
+
+@pytest.mark.parametrize("along_normal", [False, True])
+@pytest.mark.parametrize("damped", [False, True])
+def test_projection_to_the_stage_masks_damps_and_moves_along_directions(
+    along_normal: bool, damped: bool
+) -> None:
+    rng = np.random.default_rng(12)
+    n, extra = 4, 5  # 4 vertices (12 position entries), then other parameters
+    v, step = rng.normal(size=(2, 3 * n + extra))
+    mask = rng.random(3 * n + extra) > 0.3
+    damping = rng.uniform(size=v.size) if damped else np.empty(0)
+    directions = np.empty((0, 3))  # free motion
+    if along_normal:
+        directions = rng.normal(size=(n, 3))
+        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    got = v.copy()
+    project_to_stage(got, damping, step, mask, directions)
+    want = (v + (damping * step if damped else 0.0)) * mask
+    if along_normal:
+        x = want[: 3 * n].reshape(n, 3)
+        want[: 3 * n] = (directions * np.einsum("ij,ij->i", x, directions)[:, None]).ravel()
+    assert np.allclose(got, want, rtol=1e-14, atol=1e-15)
