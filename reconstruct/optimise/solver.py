@@ -59,8 +59,9 @@ class SolverSettings:
     # free motion the 3N-unknown block costs more to build than CG saves: "block" there).
     # With "amg" take cg_tolerance 3e-3 (its CG iterations are cheap; 1e-2 left its results
     # behind block's, 3e-2 far behind). Not the default: from the same fronts it is as
-    # accurate on two scenes and slightly less on two (real size: accuracy +0.8 %); 24 % less
-    # CPU at 100k on the bench scene, but slower on the real-size capture (bench/README.md).
+    # accurate on two scenes and slightly less on two (real size: accuracy +0.8 %); 14 % less
+    # CPU at 100k on the bench scene for the same wall time, slower on the real-size capture
+    # (bench/README.md).
     preconditioner: str = "block"
     coarse_hops: int = 4
     # Keep large freed blocks in the heap during the solve (glibc): −16 % time, +8 % peak RSS

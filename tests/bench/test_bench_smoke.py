@@ -86,5 +86,10 @@ def test_real_size_bench(tmp_path: Path) -> None:
     assert run["report"]["vertices"] > 0 and run["report"]["observations"] > 0
     assert run["wall_s"] > 0 and run["cpu_s"] > 0 and run["peak_rss_mb"] > 0
     assert {"decode", "poses", "initial_mesh", "optimise", "export"} <= set(run["stages"])
+    # the printed peak is never below a stage's own (per-stage resets hide those from ru_maxrss)
+    table = data["tables"][0]
+    printed_gb = float(table["rows"][0][table["columns"].index("peak RSS")].split()[0])
+    stage_gb = max(e.get("peak_rss_mb") or 0.0 for e in run["stages"].values()) / 1e3
+    assert printed_gb >= round(stage_gb, 2)
     assert 0 < run["score"]["accuracy_mm"] < 20 and 0 < run["score"]["rmse"] < 0.5
     assert (tmp_path / "runs" / "current" / "session" / "recon" / "mesh.ply").is_file()
