@@ -492,24 +492,40 @@ class Linearisation:
             _NO_GEOMETRIC if geo.jg_blocks is None else np.take(geo.jg_blocks, order, axis=0)
         )
 
-    def _lower(self, yu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``liftᵀ`` of one vector over u (N, k): x ``δx + Σ_i D_ijᵀ δn_i`` (N, 3) and α."""
-        if self.geometry.dn is None:
-            return yu[:, :3], yu[:, 6:]
-        nj = self.cost.normal_jacobian
-        per_block = np.einsum("tab,ta->tb", self.dn_t_blocks, yu[nj.transpose_row, 3:6])
-        # every vertex has its own (diagonal) block, so no column's range is empty
-        back = np.add.reduceat(per_block, nj.transpose_indptr[:-1], axis=0)
-        return yu[:, :3] + back, yu[:, 6:]
+    def _back(
+        self, yu: np.ndarray, dX: np.ndarray, dA: np.ndarray, geometric: bool
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``liftᵀ yu`` (N, k) back to x (N, 3) and α (N, N_b), plus the smoothness terms' α
+        rows at ``dA`` and, with ``geometric``, ``J_gᵀ J_g dX`` (:func:`lower_products`)."""
+        c, nj, geo = self.cost, self.cost.normal_jacobian, self.geometry
+        lap = c.laplacian
+        jg = geo.jg_blocks if geometric and geo.jg_blocks is not None else _NO_GEOMETRIC
+        return lower_products(
+            yu,
+            dX,
+            dA,
+            nj.transpose_indptr,
+            nj.transpose_row,
+            self.dn_t_blocks,
+            self.jg_t_blocks,
+            nj.block_col,
+            nj.indptr,
+            jg,
+            lap.indptr,
+            lap.indices,
+            lap.data,
+            c.gamma[0] * c.SS,
+            c.BB,
+        )
 
     def gradient(self) -> np.ndarray:
-        """Jᵀr (half the gradient of E)."""
-        c = self.cost
-        gx, ga = self._lower(self.grad_u)
-        if self.geometry.jg is not None:
-            gx = gx + (self.geometry.jg.T @ self.geometry.rg).reshape(-1, 3)
-        ga = ga + c.gamma[0] * self.A @ c.SS + (c.laplacian @ self.A) @ c.BB
-        return c.p.pack(gx, ga, self.light_grad)
+        """Jᵀr (half the gradient of E): the rendering rows lowered like a product's, the
+        smoothness terms' α rows at α itself, the geometric rows ``J_gᵀ r_g``."""
+        geo = self.geometry
+        gx, ga = self._back(self.grad_u, _NO_GEOMETRIC, np.ascontiguousarray(self.A), False)
+        if geo.jg is not None:
+            gx += (geo.jg.T @ geo.rg).reshape(-1, 3)
+        return self.cost.p.pack(gx, ga, self.light_grad)
 
     def matvec(self, delta: np.ndarray) -> np.ndarray:
         """JᵀJ δ (two compiled passes over the vertices: lift and gram, then back)."""
@@ -536,24 +552,7 @@ class Linearisation:
             yu += (self.coupling @ dL.ravel()).reshape(u.shape)
             yl = (self.coupling.T @ u.ravel()).reshape(-1, 3)
         yl = yl + np.einsum("lab,lb->la", self.light_block, dL)
-        lap = c.laplacian
-        ox, oa = lower_products(
-            yu,
-            dX,
-            dA,
-            nj.transpose_indptr,
-            nj.transpose_row,
-            self.dn_t_blocks,
-            self.jg_t_blocks,
-            nj.block_col,
-            nj.indptr,
-            _NO_GEOMETRIC if geo.jg_blocks is None else geo.jg_blocks,
-            lap.indptr,
-            lap.indices,
-            lap.data,
-            c.gamma[0] * c.SS,
-            c.BB,
-        )
+        ox, oa = self._back(yu, dX, dA, True)
         return c.p.pack(ox, oa, yl)
 
     def diagonal_blocks(self) -> tuple[np.ndarray, np.ndarray]:
