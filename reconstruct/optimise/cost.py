@@ -48,6 +48,7 @@ Robust = Literal["none", "huber", "cauchy"]
 TERMS = ("rendering", "spectral", "photometric", "geometric")
 _NO_BLOCKS = np.empty((0, 3, 3))  # positions fixed: no normal Jacobian
 _NO_GEOMETRIC = np.empty((0, 3))
+_NO_JDX = np.empty(0)  # no geometric rows in a product
 
 
 def _r_factor(m: np.ndarray) -> np.ndarray:
@@ -158,7 +159,10 @@ class JointCost:
         self.vertex_pairs = np.searchsorted(self.pair_vertex, np.arange(n + 1))
         self.pair_obs = np.r_[ps, o.count]
         self.cameras = view_cameras(p.rig.intrinsics, p.rig.poses)
-        self._evaluated: tuple[np.ndarray, bool, Geometry, RenderState] | None = None
+        # (θ, positions, geometry, render, terms) of the last `terms` call, for `linearise`
+        self._evaluated: (
+            tuple[np.ndarray, bool, Geometry, RenderState, dict[str, float]] | None
+        ) = None
         self._sampled: tuple[np.ndarray, np.ndarray] | None = None  # (X, y_obs), positions fixed
 
     # --- evaluation ---------------------------------------------------------------------
@@ -265,29 +269,32 @@ class JointCost:
         same θ: the solver evaluates every trial step and linearises where it accepts one, so
         the render (projections, image samples) is shared instead of repeated. ``positions``:
         whether that linearisation will need the vertex-position derivatives."""
-        geo, state = self._evaluate(theta, positions, reuse=False)
-        self._evaluated = (np.array(theta, copy=True), positions, geo, state)
-        return self._terms(self.p.unpack(theta)[1], geo, state)
+        geo, state, _ = self._evaluate(theta, positions, reuse=False)
+        terms = self._terms(self.p.unpack(theta)[1], geo, state)
+        self._evaluated = (np.array(theta, copy=True), positions, geo, state, terms)
+        return terms
 
     def _evaluate(
         self, theta: np.ndarray, positions: bool, reuse: bool = True
-    ) -> tuple[Geometry, RenderState]:
-        """Geometry and render with derivatives at θ (from :meth:`terms` when it was there).
+    ) -> tuple[Geometry, RenderState, dict[str, float] | None]:
+        """Geometry and render with derivatives at θ, and the terms there (from :meth:`terms`
+        when it was there, else None).
 
         :meth:`terms` (``reuse=False``) leaves the normal Jacobian out: a trial step needs only
         the cost, and the linearisation after an accepted one adds it here (at 100k vertices
         0.4 s saved per rejected or shortened trial)."""
         kept, self._evaluated = self._evaluated, None
+        terms = None
         if reuse and kept is not None and kept[1] == positions and np.array_equal(kept[0], theta):
-            geo, state = kept[2], kept[3]
+            geo, state, terms = kept[2], kept[3], kept[4]
         else:
             kept = None  # free the kept state before a new one exists (~0.4 kB per observation)
             X, A, light = self.p.unpack(theta)
             geo = self.geometry(X, derivatives=positions and reuse)
             state = self.render(X, A, light, geo.normals, derivatives=True, positions=positions)
         if reuse and positions and geo.dn is None:
-            geo = self.geometry(self.p.unpack(theta)[0], derivatives=True)
-        return geo, state
+            geo = self.geometry(self.p.unpack(theta)[0], derivatives=True)  # same terms
+        return geo, state, terms
 
     def _terms(self, A: np.ndarray, geo: Geometry, state: RenderState) -> dict[str, float]:
         rho, _ = self._robust(state.error)
@@ -380,11 +387,13 @@ class JointCost:
         """
         p, o = self.p, self.p.obs
         A = p.unpack(theta)[1]
-        geo, st = self._evaluate(theta, positions)
+        geo, st, terms = self._evaluate(theta, positions)
         assert st.g is not None and st.h is not None
-        terms = self._terms(A, geo, st)
-        _, rw = self._robust(st.error)
-        wt = self.obs_weight * rw
+        if terms is None:
+            terms = self._terms(A, geo, st)
+        wt = self.obs_weight
+        if self.robust != "none":  # the IRLS weights (1 without a robust loss)
+            wt = wt * self._robust(st.error)[1]
         gl = np.empty_like(st.g)  # g̃ = M_cᵀ g per pair
         for c, idx in enumerate(self.view_pairs):
             gl[idx] = st.g[idx] @ self.light_maps[c]
@@ -392,7 +401,7 @@ class JointCost:
         if grad is None or duv is None:  # fixed observations or fixed positions
             grad, duv = np.empty((0, 3, 2)), np.empty((0, 2, 3))
         shared = p.n_light == 3
-        gram, grad_u, a, cc, pair_e, coupling = accumulate_normal_equations(
+        gram, shading2, grad_u, a, cc, pair_e, coupling = accumulate_normal_equations(
             self.vertex_pairs,
             self.pair_obs,
             o.illumination,
@@ -406,13 +415,16 @@ class JointCost:
             duv,
             gl,
             self.Q,
-            self.QtQ,
             shared,
         )
-        # Σ_p cc_p g̃_p g̃_pᵀ per light, a row at a time: no (pairs × 9) temporaries
-        light_block = np.stack(
-            [self.pair_to_light @ ((cc * gl[:, r])[:, None] * gl) for r in range(3)], axis=1
-        )
+        # Σ_p cc_p g̃_p g̃_pᵀ per light: one (3 × P)(P × 3) product for the shared light, else a
+        # row at a time (no (pairs × 9) temporaries)
+        if shared:
+            light_block = ((cc[:, None] * gl).T @ gl)[None]
+        else:
+            light_block = np.stack(
+                [self.pair_to_light @ ((cc * gl[:, r])[:, None] * gl) for r in range(3)], axis=1
+            )
         light_grad = self.pair_to_light @ (gl * pair_e[:, None])
         if not shared:
             coupling = _pair_coupling(
@@ -427,6 +439,7 @@ class JointCost:
             geometry=geo,
             A=A,
             gram=gram,
+            shading2=shading2,
             grad_u=grad_u,
             coupling=coupling,
             light_block=light_block,
@@ -475,7 +488,10 @@ class Linearisation:
     terms: dict[str, float]
     geometry: Geometry
     A: np.ndarray
-    gram: np.ndarray  # per-vertex Σ A_oᵀA_o over u (N, k, k)
+    # per-vertex G = Σ A_oᵀA_o over u by its position rows (N, 6, k); its α×α block is
+    # Σ_k shading2[:, k] QᵀQ_k (N, K) (kernels.accumulate_normal_equations)
+    gram: np.ndarray
+    shading2: np.ndarray
     grad_u: np.ndarray  # (N, k)
     coupling: np.ndarray | sp.csr_array  # u × light: (N, k, 3) shared offset; sparse (N·k, 3V)
     light_block: np.ndarray  # light × light, (n_light/3, 3, 3)
@@ -492,40 +508,41 @@ class Linearisation:
             _NO_GEOMETRIC if geo.jg_blocks is None else np.take(geo.jg_blocks, order, axis=0)
         )
 
-    def _back(
-        self, yu: np.ndarray, dX: np.ndarray, dA: np.ndarray, geometric: bool
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """``liftᵀ yu`` (N, k) back to x (N, 3) and α (N, N_b), plus the smoothness terms' α
-        rows at ``dA`` and, with ``geometric``, ``J_gᵀ J_g dX`` (:func:`lower_products`)."""
-        c, nj, geo = self.cost, self.cost.normal_jacobian, self.geometry
+    def _back(self, yu: np.ndarray, dA: np.ndarray, jdx: np.ndarray) -> np.ndarray:
+        """A θ-shaped vector with ``liftᵀ yu`` (N, k) back in x (N, 3) and α (N, N_b), plus the
+        smoothness terms' α rows at ``dA`` and ``J_gᵀ jdx`` (jdx = J_g δx; empty: none)
+        (:func:`lower_products`); its light part is left for the caller."""
+        c, nj = self.cost, self.cost.normal_jacobian
         lap = c.laplacian
-        jg = geo.jg_blocks if geometric and geo.jg_blocks is not None else _NO_GEOMETRIC
-        return lower_products(
+        out = np.empty(self.theta.size)
+        ox, oa, _ = c.p.unpack(out)
+        lower_products(
             yu,
-            dX,
             dA,
             nj.transpose_indptr,
             nj.transpose_row,
             self.dn_t_blocks,
             self.jg_t_blocks,
-            nj.block_col,
-            nj.indptr,
-            jg,
+            jdx,
             lap.indptr,
             lap.indices,
             lap.data,
             c.gamma[0] * c.SS,
             c.BB,
+            ox,
+            oa,
         )
+        return out
 
     def gradient(self) -> np.ndarray:
         """Jᵀr (half the gradient of E): the rendering rows lowered like a product's, the
         smoothness terms' α rows at α itself, the geometric rows ``J_gᵀ r_g``."""
-        geo = self.geometry
-        gx, ga = self._back(self.grad_u, _NO_GEOMETRIC, np.ascontiguousarray(self.A), False)
+        geo, sx, _, sl = self.geometry, *self.cost.p.slices()
+        out = self._back(self.grad_u, np.ascontiguousarray(self.A), _NO_JDX)
         if geo.jg is not None:
-            gx += (geo.jg.T @ geo.rg).reshape(-1, 3)
-        return self.cost.p.pack(gx, ga, self.light_grad)
+            out[sx] += geo.jg.T @ geo.rg
+        out[sl] = self.light_grad.ravel()
+        return out
 
     def matvec(self, delta: np.ndarray) -> np.ndarray:
         """JᵀJ δ (two compiled passes over the vertices: lift and gram, then back)."""
@@ -533,27 +550,29 @@ class Linearisation:
         dX, dA, dL = c.p.unpack(delta)
         dX, dA = np.ascontiguousarray(dX), np.ascontiguousarray(dA)
         nj, geo = c.normal_jacobian, self.geometry
-        k = self.gram.shape[1]
+        k = self.gram.shape[2]
         dn_blocks = _NO_BLOCKS if geo.dn is None else geo.dn.data
         shared = isinstance(self.coupling, np.ndarray)
-        u, yu = gram_products(
+        jg = _NO_GEOMETRIC if geo.jg_blocks is None else geo.jg_blocks
+        u, yu, yl, jdx = gram_products(
             self.gram,
+            self.shading2,
+            c.Q,
             dX,
             dA,
             nj.indptr,
             nj.block_col,
             dn_blocks,
+            jg,
             self.coupling if shared else np.empty((0, k, 3)),
             dL[0],
         )
-        if isinstance(self.coupling, np.ndarray):
-            yl = (self.coupling.reshape(-1, 3).T @ u.ravel())[None]
-        else:
+        if not isinstance(self.coupling, np.ndarray):
             yu += (self.coupling @ dL.ravel()).reshape(u.shape)
             yl = (self.coupling.T @ u.ravel()).reshape(-1, 3)
-        yl = yl + np.einsum("lab,lb->la", self.light_block, dL)
-        ox, oa = self._back(yu, dX, dA, True)
-        return c.p.pack(ox, oa, yl)
+        out = self._back(yu, dA, jdx)
+        out[c.p.slices()[2]] = (yl + np.einsum("lab,lb->la", self.light_block, dL)).ravel()
+        return out
 
     def diagonal_blocks(self) -> tuple[np.ndarray, np.ndarray]:
         """Exact diagonal blocks of JᵀJ: per vertex over [x (3), α (N_b)] and per light block
@@ -561,6 +580,8 @@ class Linearisation:
         c, nj = self.cost, self.cost.normal_jacobian
         blk = vertex_diagonal_blocks(
             self.gram,
+            self.shading2,
+            c.QtQ,
             c.gamma[0] * c.SS,
             c.lap_diag,
             c.BB,
@@ -583,11 +604,7 @@ class Linearisation:
         cu = self.coupling
         k = 6 + c.p.n_basis
         dn = self.geometry.dn
-        dii = np.zeros((n, 3, 3))
-        if dn is not None:
-            nj = c.normal_jacobian
-            self_blk = nj.block_row == nj.block_col
-            dii[nj.block_row[self_blk]] = dn.data[self_blk]
+        dii = np.zeros((n, 3, 3)) if dn is None else dn.data[c.normal_jacobian.diagonal_block]
         # [x, α] rows from u = [x, n, α] rows: x + D_iiᵀ n, and α.
         if isinstance(cu, np.ndarray):
             out = np.empty((n, k - 3, 3))

@@ -102,9 +102,8 @@ def accumulate_normal_equations(
     proj_jac: np.ndarray,
     light_grad: np.ndarray,
     Q: np.ndarray,
-    QtQ: np.ndarray,
     shared_light: bool,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per-vertex blocks of JᵀJ and Jᵀr over u = [δx, δn, δα] (k = 6 + N_b).
 
     Per observation o of pair p (vertex i, view c) the rendering Jacobian row block is
@@ -114,9 +113,12 @@ def accumulate_normal_equations(
     ``pair_obs[p]:pair_obs[p+1]``; ``weight`` w (M,), ``colours`` c per (illumination,
     vertex) (K, N, 3), ``residual`` r = w e (M, 3), ``image_grad`` (M, 3, 2) or empty (fixed
     observations), per pair the shading s, g, h (P, 3), ``proj_jac`` (P, 2, 3) and
-    ``light_grad`` g̃ = M_cᵀ g (P, 3); ``Q`` (K, 3, N_b) and ``QtQ`` (K, N_b, N_b).
+    ``light_grad`` g̃ = M_cᵀ g (P, 3); ``Q`` (K, 3, N_b).
 
-    Returns gram (N, k, k), grad_u (N, k), a_p = Σ_o A_oᵀ w c_o (P, k; empty for a light
+    Returns the gram Σ_o A_oᵀA_o by its position rows (N, 6, k) — its α×α block is
+    ``Σ_k s2_k QᵀQ_k`` with the returned per-(vertex, illumination) weights s2 = Σ w² s²
+    (N, K), stored as those K numbers instead of N_b² (68 instead of 157 MB at 100k) —
+    grad_u (N, k), a_p = Σ_o A_oᵀ w c_o (P, k; empty for a light
     shared by all views), cc_p = Σ_o |w c_o|² (P,), e_p = Σ_o w c_o·r_o (P,) and, for a shared
     light, the vertex–light coupling Σ_p a_p g̃_pᵀ (N, k, 3) (else empty).
     """
@@ -125,14 +127,15 @@ def accumulate_normal_equations(
     n_ill, _, nb = Q.shape
     k = 6 + nb
     images = image_grad.shape[0] > 0
-    gram = np.zeros((n, k, k))
+    gram = np.zeros((n, 6, k))
+    shading2 = np.zeros((n, n_ill))
     grad_u = np.zeros((n, k))
     a_all = np.zeros((0 if shared_light else n_pairs, k))  # only free lights need a_p
     cc_all = np.zeros(n_pairs)
     e_all = np.zeros(n_pairs)
     coupling = np.zeros((n if shared_light else 0, k, 3))
     for i in prange(n):
-        group_s2 = np.zeros(n_ill)  # Σ w² s² per illumination
+        group_s2 = shading2[i]  # Σ w² s² per illumination
         group_sr = np.zeros((n_ill, 3))  # Σ w s r per illumination
         u = np.zeros(6)
         a = np.zeros(k)
@@ -186,13 +189,12 @@ def accumulate_normal_equations(
             if images:
                 for d in range(3):
                     a[d] -= proj_jac[p, 0, d] * gc0 + proj_jac[p, 1, d] * gc1
-            # Σ_o A_oᵀA_o = u aᵀ + a uᵀ − cc u uᵀ + Σ_o w² V_oᵀV_o (the last below)
+            # Σ_o A_oᵀA_o = u aᵀ + a uᵀ − cc u uᵀ + Σ_o w² V_oᵀV_o (the last below), rows < 6
             for r in range(6):
                 for q in range(k):
                     gram[i, r, q] += u[r] * a[q]
-                    gram[i, q, r] += a[q] * u[r]
                 for q in range(6):
-                    gram[i, r, q] -= cc * u[r] * u[q]
+                    gram[i, r, q] += a[r] * u[q] - cc * u[r] * u[q]
                 grad_u[i, r] += u[r] * pe
             if images:
                 # duvᵀ (Σ w² gradᵀgrad) duv, −duvᵀ Σ w gradᵀr, −duvᵀ Σ w² s gradᵀQ
@@ -206,7 +208,6 @@ def accumulate_normal_equations(
                     for b in range(nb):
                         xa = jr0 * pg[0, b] + jr1 * pg[1, b]
                         gram[i, r, 6 + b] -= xa
-                        gram[i, 6 + b, r] -= xa
             if not shared_light:
                 for q in range(k):
                     a_all[p, q] = a[q]
@@ -218,133 +219,171 @@ def accumulate_normal_equations(
                         coupling[i, q, d] += a[q] * light_grad[p, d]
         for ill in range(n_ill):
             for b in range(nb):
-                for q in range(nb):
-                    gram[i, 6 + b, 6 + q] += group_s2[ill] * QtQ[ill, b, q]
                 grad_u[i, 6 + b] += (
                     group_sr[ill, 0] * Q[ill, 0, b]
                     + group_sr[ill, 1] * Q[ill, 1, b]
                     + group_sr[ill, 2] * Q[ill, 2, b]
                 )
-    return gram, grad_u, a_all, cc_all, e_all, coupling
+    return gram, shading2, grad_u, a_all, cc_all, e_all, coupling
 
 
 @njit(parallel=True, cache=True, fastmath=True)
 def gram_products(
     gram: np.ndarray,
+    shading2: np.ndarray,
+    Q: np.ndarray,
     dX: np.ndarray,
     dA: np.ndarray,
     dn_indptr: np.ndarray,
     dn_col: np.ndarray,
     dn_blocks: np.ndarray,
+    jg_blocks: np.ndarray,
     coupling: np.ndarray,
     dL: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """First half of ``Linearisation.matvec``: per vertex the lifted step
-    u = [δx, δn = Σ_j D_ij δx_j, δα] (N, k) and ``gram u (+ C_i δl)`` (N, k). ``dn_*`` is the
-    block-CSR normal Jacobian (empty ``dn_blocks``: positions fixed, δn = 0); ``coupling``
-    (N, k, 3) with the shared light's step ``dL`` (3,), or empty."""
-    n, k = gram.shape[0], gram.shape[1]
+    u = [δx, δn = Σ_j D_ij δx_j, δα] (N, k) and ``G u (+ C_i δl)`` (N, k), with the gram G by
+    its position rows ``gram`` (N, 6, k) and its α×α block ``Σ_k shading2[i, k] Q_kᵀQ_k``
+    (:func:`accumulate_normal_equations`; applied as ``Q_kᵀ (Q_k δα)``, ``Q`` (K, 3, N_b): 6 N_b
+    products per illumination instead of N_b²). ``dn_*`` is the block-CSR normal Jacobian
+    (empty ``dn_blocks``: positions fixed, δn = 0); ``coupling`` (N, k, 3) with the shared
+    light's step ``dL`` (3,), or empty.
+
+    Also returns, summed in the same pass instead of re-reading C, u and the blocks: the shared
+    light's rows ``Σ_i C_iᵀ u_i`` (3,; zeros without a coupling) and the geometric term's
+    ``J_g δx`` (N,) from its blocks ``jg_blocks`` (blocks, 3) on the normal Jacobian's
+    sparsity (empty: none)."""
+    n, k = gram.shape[0], gram.shape[2]
     nb = dA.shape[1]
+    n_ill = Q.shape[0]
     with_normals = dn_blocks.shape[0] > 0
+    with_geometric = jg_blocks.shape[0] > 0
     shared = coupling.shape[0] > 0
     u = np.empty((n, k))
     yu = np.empty((n, k))
+    jdx = np.empty(n if with_geometric else 0)
+    l0 = 0.0
+    l1 = 0.0
+    l2 = 0.0
     for i in prange(n):
-        ui = u[i]
-        for d in range(3):
-            ui[d] = dX[i, d]
-            ui[3 + d] = 0.0
+        n0 = 0.0
+        n1 = 0.0
+        n2 = 0.0
+        jd = 0.0
         if with_normals:
             for b in range(dn_indptr[i], dn_indptr[i + 1]):
                 j = dn_col[b]
-                for r in range(3):
-                    ui[3 + r] += (
-                        dn_blocks[b, r, 0] * dX[j, 0]
-                        + dn_blocks[b, r, 1] * dX[j, 1]
-                        + dn_blocks[b, r, 2] * dX[j, 2]
-                    )
+                x0, x1, x2 = dX[j, 0], dX[j, 1], dX[j, 2]
+                n0 += dn_blocks[b, 0, 0] * x0 + dn_blocks[b, 0, 1] * x1 + dn_blocks[b, 0, 2] * x2
+                n1 += dn_blocks[b, 1, 0] * x0 + dn_blocks[b, 1, 1] * x1 + dn_blocks[b, 1, 2] * x2
+                n2 += dn_blocks[b, 2, 0] * x0 + dn_blocks[b, 2, 1] * x1 + dn_blocks[b, 2, 2] * x2
+                if with_geometric:
+                    jd += jg_blocks[b, 0] * x0 + jg_blocks[b, 1] * x1 + jg_blocks[b, 2] * x2
+        if with_geometric:
+            jdx[i] = jd
+        ui = u[i]
+        ui[0], ui[1], ui[2] = dX[i, 0], dX[i, 1], dX[i, 2]
+        ui[3], ui[4], ui[5] = n0, n1, n2
         for b in range(nb):
             ui[6 + b] = dA[i, b]
+        y = yu[i]
         for r in range(k):
+            y[r] = 0.0
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        if shared:
+            c = coupling[i]
+            for r in range(k):
+                y[r] = c[r, 0] * dL[0] + c[r, 1] * dL[1] + c[r, 2] * dL[2]
+                a0 += c[r, 0] * ui[r]
+                a1 += c[r, 1] * ui[r]
+                a2 += c[r, 2] * ui[r]
+        l0 += a0  # prange reductions: at the loop body's top level only
+        l1 += a1
+        l2 += a2
+        for r in range(6):  # the position rows, and their transposes into the α rows
             acc = 0.0
             for q in range(k):
                 acc += gram[i, r, q] * ui[q]
-            if shared:
-                for d in range(3):
-                    acc += coupling[i, r, d] * dL[d]
-            yu[i, r] = acc
-    return u, yu
+            y[r] += acc
+            ur = ui[r]
+            for b in range(nb):
+                y[6 + b] += gram[i, r, 6 + b] * ur
+        for ill in range(n_ill):  # α×α: s Qᵀ (Q δα)
+            s = shading2[i, ill]
+            for c in range(3):
+                t = 0.0
+                for q in range(nb):
+                    t += Q[ill, c, q] * ui[6 + q]
+                t *= s
+                for b in range(nb):
+                    y[6 + b] += Q[ill, c, b] * t
+    return u, yu, np.array([l0, l1, l2]), jdx
 
 
 @njit(parallel=True, cache=True, fastmath=True)
 def lower_products(
     yu: np.ndarray,
-    dX: np.ndarray,
     dA: np.ndarray,
     dn_t_indptr: np.ndarray,
     dn_t_row: np.ndarray,
     dn_t_blocks: np.ndarray,
     jg_t_blocks: np.ndarray,
-    dn_col: np.ndarray,
-    dn_indptr: np.ndarray,
-    jg_blocks: np.ndarray,
+    jdx: np.ndarray,
     lap_indptr: np.ndarray,
     lap_col: np.ndarray,
     lap_val: np.ndarray,
     spectral: np.ndarray,
     photometric: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Second half of ``Linearisation.matvec``: back from u to [x, α]:
+    ox: np.ndarray,
+    oa: np.ndarray,
+) -> None:
+    """Second half of ``Linearisation.matvec``: back from u to [x, α], written into ``ox``
+    (N, 3) and ``oa`` (N, N_b) (views of the product, so it needs no packing):
     ``x_j = yu_j[:3] + Σ_i D_ijᵀ yu_i[3:6] + Σ_i J_g(i, j)ᵀ (J_g δx)_i`` and
     ``α_j = yu_j[6:] + δα_j S + (L δα)_j Bᵀ B`` (S = γ1 R_sᵀR_s, ``photometric`` = R_bᵀR_b).
     The transpose runs over copies of the blocks stored column by column (``dn_t_*``,
     ``jg_t_blocks``: the transpose's CSR), so every vertex writes only its own rows and reads
     its blocks in sequence (gathering them by index from the row-ordered arrays made this
-    product memory-latency bound: 61 → 36 ms on one core at 100k); ``jg_blocks`` (blocks, 3),
-    in row order, share the normal Jacobian's sparsity. Empty ``dn_t_blocks``: positions
-    fixed."""
+    product memory-latency bound: 61 → 36 ms on one core at 100k; sums in registers and
+    contiguous inner loops: 36 → 24 ms); ``jdx`` = J_g δx (N,) from :func:`gram_products`
+    (empty: the geometric rows are left out). Empty ``dn_t_blocks``: positions fixed."""
     n, k = yu.shape
     nb = dA.shape[1]
     with_normals = dn_t_blocks.shape[0] > 0
-    with_geometric = jg_blocks.shape[0] > 0
-    jdx = np.zeros(n)
-    if with_geometric:
-        for i in prange(n):
-            acc = 0.0
-            for b in range(dn_indptr[i], dn_indptr[i + 1]):
-                j = dn_col[b]
-                for d in range(3):
-                    acc += jg_blocks[b, d] * dX[j, d]
-            jdx[i] = acc
-    ox = np.empty((n, 3))
-    oa = np.empty((n, nb))
-    lap_a = np.zeros((n, nb))  # (L δα)_j, preallocated: no heap allocation per vertex
+    with_geometric = jdx.shape[0] > 0
+    lap_a = np.empty((n, nb))  # (L δα)_j, preallocated: no heap allocation per vertex
     for j in prange(n):
-        for d in range(3):
-            ox[j, d] = yu[j, d]
+        x0, x1, x2 = yu[j, 0], yu[j, 1], yu[j, 2]
         if with_normals:
             for t in range(dn_t_indptr[j], dn_t_indptr[j + 1]):
                 i = dn_t_row[t]
-                for d in range(3):
-                    ox[j, d] += (
-                        dn_t_blocks[t, 0, d] * yu[i, 3]
-                        + dn_t_blocks[t, 1, d] * yu[i, 4]
-                        + dn_t_blocks[t, 2, d] * yu[i, 5]
-                    )
+                y3, y4, y5 = yu[i, 3], yu[i, 4], yu[i, 5]
+                dn = dn_t_blocks[t]
+                x0 += dn[0, 0] * y3 + dn[1, 0] * y4 + dn[2, 0] * y5
+                x1 += dn[0, 1] * y3 + dn[1, 1] * y4 + dn[2, 1] * y5
+                x2 += dn[0, 2] * y3 + dn[1, 2] * y4 + dn[2, 2] * y5
                 if with_geometric:
-                    for d in range(3):
-                        ox[j, d] += jg_t_blocks[t, d] * jdx[i]
+                    jd = jdx[i]
+                    x0 += jg_t_blocks[t, 0] * jd
+                    x1 += jg_t_blocks[t, 1] * jd
+                    x2 += jg_t_blocks[t, 2] * jd
+        ox[j, 0], ox[j, 1], ox[j, 2] = x0, x1, x2
         la = lap_a[j]
-        for t in range(lap_indptr[j], lap_indptr[j + 1]):
-            m = lap_col[t]
-            for b in range(nb):
-                la[b] += lap_val[t] * dA[m, b]
         for b in range(nb):
-            acc = yu[j, 6 + b]
-            for q in range(nb):
-                acc += dA[j, q] * spectral[q, b] + la[q] * photometric[q, b]
-            oa[j, b] = acc
-    return ox, oa
+            la[b] = 0.0
+        for t in range(lap_indptr[j], lap_indptr[j + 1]):
+            m, v = lap_col[t], lap_val[t]
+            for b in range(nb):
+                la[b] += v * dA[m, b]
+        o = oa[j]
+        for b in range(nb):
+            o[b] = yu[j, 6 + b]
+        for q in range(nb):  # Σ_q by rows of S and BᵀB: a contiguous inner loop
+            d, lq = dA[j, q], la[q]
+            for b in range(nb):
+                o[b] += d * spectral[q, b] + lq * photometric[q, b]
 
 
 @njit(parallel=True, cache=True, fastmath=True)
@@ -402,6 +441,58 @@ def coupling_transpose_product(coupling: np.ndarray, z: np.ndarray) -> np.ndarra
             s1 += coupling[i, r, 1] * z[i, r]
             s2 += coupling[i, r, 2] * z[i, r]
     return np.array([s0, s1, s2])
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def eliminate_shared_light(
+    inverse: np.ndarray,
+    coupling: np.ndarray,
+    shapes: np.ndarray,
+    alpha_mask: np.ndarray,
+    light_mask: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The block preconditioner's light elimination for a shared light, one pass per vertex:
+    the coupling in the block's unknowns ``C̃_i = B_iᵀ C_i`` (N, m + N_b, 3) from ``coupling``
+    C (N, 3 + N_b, 3) over [x, α] (B_i as in :func:`damped_block_inverses`, the light's columns
+    masked by ``light_mask`` (3,) 1 = free), ``D_i⁻¹ C̃_i`` (N, m + N_b, 3) with the block
+    inverses ``inverse``, and per vertex ``C̃_iᵀ D_i⁻¹ C̃_i`` (N, 3, 3), whose sum the Schur
+    complement subtracts. NumPy's batched products over these tiny blocks took 95 ms at 100k."""
+    n, k = inverse.shape[0], inverse.shape[1]
+    m = shapes.shape[2]
+    nb = k - m
+    reduced = np.empty((n, k, 3))
+    dinv_c = np.empty((n, k, 3))
+    schur_terms = np.empty((n, 3, 3))
+    for i in prange(n):
+        c = reduced[i]
+        for j in range(m):
+            for d in range(3):
+                c[j, d] = light_mask[d] * (
+                    shapes[i, 0, j] * coupling[i, 0, d]
+                    + shapes[i, 1, j] * coupling[i, 1, d]
+                    + shapes[i, 2, j] * coupling[i, 2, d]
+                )
+        for b in range(nb):
+            for d in range(3):
+                c[m + b, d] = light_mask[d] * alpha_mask[i, b] * coupling[i, 3 + b, d]
+        e = dinv_c[i]
+        for r in range(k):
+            e0 = 0.0
+            e1 = 0.0
+            e2 = 0.0
+            for q in range(k):
+                v = inverse[i, r, q]
+                e0 += v * c[q, 0]
+                e1 += v * c[q, 1]
+                e2 += v * c[q, 2]
+            e[r, 0], e[r, 1], e[r, 2] = e0, e1, e2
+        for d in range(3):
+            for f in range(3):
+                acc = 0.0
+                for r in range(k):
+                    acc += c[r, d] * e[r, f]
+                schur_terms[i, d, f] = acc
+    return reduced, dinv_c, schur_terms
 
 
 @njit(inline="always", cache=True, fastmath=True)
@@ -571,6 +662,8 @@ def damped_block_inverses(
 @njit(parallel=True, cache=True, fastmath=True)
 def vertex_diagonal_blocks(
     gram: np.ndarray,
+    shading2: np.ndarray,
+    QtQ: np.ndarray,
     spectral: np.ndarray,
     lap_diag: np.ndarray,
     photometric: np.ndarray,
@@ -580,15 +673,17 @@ def vertex_diagonal_blocks(
     transpose_row: np.ndarray,
 ) -> np.ndarray:
     """The diagonal blocks of JᵀJ per vertex j over [x (3), α (N_b)] (N, 3+N_b, 3+N_b):
-    ``gram``'s [x, α] rows and columns, the smoothness terms' α×α part ``S + L_jj Bᵀ B``
+    the gram's [x, α] rows and columns, the smoothness terms' α×α part ``S + L_jj Bᵀ B``
     (``spectral`` S = γ1 R_sᵀR_s, ``photometric`` = R_bᵀR_b), and what the normals and the
     geometric term add: x×x ``Σ_i D_ijᵀ G_nn(i) D_ij + J_g(i, j)ᵀ J_g(i, j)`` plus, from its own
-    normal, ``G_xn D_jj + (G_xn D_jj)ᵀ``, and x×α ``D_jjᵀ G_nα``. ``gram`` (N, k, k) over
-    u = [x, n, α]; ``dn_blocks`` D (blocks, 3, 3) and ``geometric`` (blocks, 3) on the normal
-    Jacobian's sparsity, stored column by column (the transpose's CSR: ``transpose_indptr``,
-    rows ``transpose_row``); empty ``dn_blocks``: positions fixed. One pass: NumPy's slice
-    copies and sums took 300 ms at 100k, this 80."""
-    n, k = gram.shape[0], gram.shape[1]
+    normal, ``G_xn D_jj + (G_xn D_jj)ᵀ``, and x×α ``D_jjᵀ G_nα``. The gram G over
+    u = [x, n, α] comes as its position rows ``gram`` (N, 6, k) and α×α weights ``shading2``
+    (N, K) of ``QtQ`` (K, N_b, N_b) (:func:`accumulate_normal_equations`); ``dn_blocks`` D
+    (blocks, 3, 3) and ``geometric`` (blocks, 3) on the normal Jacobian's sparsity, stored
+    column by column (the transpose's CSR: ``transpose_indptr``, rows ``transpose_row``); empty
+    ``dn_blocks``: positions fixed. One pass: NumPy's slice copies and sums took 300 ms at
+    100k, this 80."""
+    n, k = gram.shape[0], gram.shape[2]
     nb = k - 6
     with_normals = dn_blocks.shape[0] > 0
     out = np.empty((n, 3 + nb, 3 + nb))
@@ -599,12 +694,15 @@ def vertex_diagonal_blocks(
                 o[r, q] = gram[j, r, q]
             for a in range(nb):
                 o[r, 3 + a] = gram[j, r, 6 + a]
-                o[3 + a, r] = gram[j, 6 + a, r]
+                o[3 + a, r] = gram[j, r, 6 + a]
         for a in range(nb):
             for b in range(nb):
-                o[3 + a, 3 + b] = (
-                    gram[j, 6 + a, 6 + b] + spectral[a, b] + lap_diag[j] * photometric[a, b]
-                )
+                o[3 + a, 3 + b] = spectral[a, b] + lap_diag[j] * photometric[a, b]
+        for ill in range(QtQ.shape[0]):
+            s2 = shading2[j, ill]
+            for a in range(nb):
+                for b in range(nb):
+                    o[3 + a, 3 + b] += s2 * QtQ[ill, a, b]
         if not with_normals:
             continue
         for t in range(transpose_indptr[j], transpose_indptr[j + 1]):
@@ -685,12 +783,13 @@ def position_columns(
     step in u_i = [x_i, n_i, α_i] from a shape step h_j of a ring vertex j is
     U_ij = [δ_ij S_i; D_ij S_j; 0], so i adds ``U_icᵀ G_i U_ib + w_icᵀ w_ib`` (w = J_g S, the
     geometric term) to the position block at (j_c, j_b), ``(G_i U_ib)[α]`` to α_i's rows and
-    ``C_iᵀ U_ib`` to the shared light's rows (``coupling`` (N, k, 3), or empty).
+    ``C_iᵀ U_ib`` to the shared light's rows (``coupling`` (N, k, 3), or empty). U has no α
+    part, so G's position rows ``gram`` (N, 6, k) are all it needs.
 
     Returns the position block's values (n_pairs, m, m) on the :func:`ring_pair_slots`
     pattern, the α rows (blocks, N_b, m) on the normal Jacobian's pattern and the light rows
     (3, N, m). Serial: the vertices' shares overlap (a 2-ring per column)."""
-    n, k = gram.shape[0], gram.shape[1]
+    n, k = gram.shape[0], gram.shape[2]
     m = shapes.shape[2]
     nb = k - 6
     shared = coupling.shape[0] > 0
@@ -720,10 +819,10 @@ def position_columns(
                     + geometric[b, 1] * shapes[j, 1, q]
                     + geometric[b, 2] * shapes[j, 2, q]
                 )
-                for row in range(k):
+                for row in range(k):  # G's columns < 6 are its position rows
                     acc = 0.0
                     for s in range(6):
-                        acc += gram[i, row, s] * U[t, s, q]
+                        acc += gram[i, s, row] * U[t, s, q]
                     Y[t, row, q] = acc
                 for a in range(nb):
                     ah[b, a, q] = Y[t, 6 + a, q]

@@ -78,6 +78,7 @@ class NormalJacobian:
         self.block_col = ukey % nv
         self.indptr = np.searchsorted(self.block_row, np.arange(nv + 1))
         self.n_blocks = int(ukey.size)
+        self.diagonal_block = np.flatnonzero(self.block_row == self.block_col)  # D_ii, by i
         # The transpose's blocks, column by column (a product with ∂n/∂Xᵀ writes each row once).
         self.transpose_block = np.argsort(self.block_col, kind="stable")
         self.transpose_indptr = np.searchsorted(

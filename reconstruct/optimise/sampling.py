@@ -14,7 +14,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from reconstruct.camera import Intrinsics, Pose
-from reconstruct.optimise.kernels import project_points
+from reconstruct.optimise.kernels import project_points, sample_bilinear
 from reconstruct.optimise.problem import Frames
 
 
@@ -29,6 +29,14 @@ def bilinear(
     value, grad = sample_taps(images, frame, bilinear_taps(images.shape[1:3], uv), gradient=True)
     assert grad is not None
     return value, grad
+
+
+def bilinear_values(images: np.ndarray, frame: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """The values of :func:`bilinear` alone (M, C), by the compiled sampler: building the
+    observation set samples every visible (vertex, frame) once and needs no gradients."""
+    index, fc, fr = bilinear_taps(images.shape[1:3], uv)
+    frac = np.concatenate([fc, fr], axis=1)
+    return sample_bilinear(images, frame, np.arange(len(uv)), index, frac, False)[0]
 
 
 Taps = tuple[np.ndarray, np.ndarray, np.ndarray]
