@@ -36,13 +36,12 @@ from reconstruct.optimise.kernels import (
     lower_products,
     project_points,
     rendered_error,
-    sample_bilinear,
     shading_gradients,
     vertex_diagonal_blocks,
 )
 from reconstruct.optimise.mesh import NormalJacobian, adjacency, vertex_normals
 from reconstruct.optimise.problem import Problem
-from reconstruct.optimise.sampling import bilinear_taps, view_cameras
+from reconstruct.optimise.sampling import sample_pairs, view_cameras
 
 Robust = Literal["none", "huber", "cauchy"]
 TERMS = ("rendering", "spectral", "photometric", "geometric")
@@ -238,10 +237,7 @@ class JointCost:
         images = p.frames.images
         assert images is not None
         uv, jac = project_points(X, self.pair_vertex, self.pair_view, *self.cameras, gradient)
-        index, fc, fr = bilinear_taps(images.shape[1:3], uv)
-        del uv
-        frac = np.concatenate([fc, fr], axis=1)
-        y_obs, grad = sample_bilinear(images, o.frame, self.obs_pair, index, frac, gradient)
+        y_obs, grad = sample_pairs(images, o.frame, self.obs_pair, uv, gradient)
         if gradient:
             return y_obs, grad, jac
         self._sampled = (np.array(X, copy=True), y_obs)
@@ -479,9 +475,10 @@ def _blocks(
 
 @dataclass
 class Linearisation:
-    """JᵀJ and Jᵀr at one θ in factored form: per-vertex k×k blocks over u = [δx, δn, δα]
-    (k = 6 + N_b), the vertex–light coupling and the light's own blocks. A product costs
-    O(N k²) plus the sparse normal and smoothness operators, never forming J."""
+    """JᵀJ and Jᵀr at one θ in factored form: per vertex the k×k gram over u = [δx, δn, δα]
+    (k = 6 + N_b; kept as its 6 position rows and K α×α weights), the vertex–light coupling
+    and the light's own blocks. A product costs O(N k) plus the sparse normal and smoothness
+    operators, never forming J."""
 
     cost: JointCost
     theta: np.ndarray

@@ -31,12 +31,15 @@ def bilinear(
     return value, grad
 
 
-def bilinear_values(images: np.ndarray, frame: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """The values of :func:`bilinear` alone (M, C), by the compiled sampler: building the
-    observation set samples every visible (vertex, frame) once and needs no gradients."""
+def sample_pairs(
+    images: np.ndarray, frame: np.ndarray, obs_pair: np.ndarray, uv: np.ndarray, gradient: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """Compiled :func:`bilinear`: observation m reads frame ``frame[m]`` at its pair's pixel
+    coords ``uv[obs_pair[m]]`` (``uv`` (P, 2), one projection's taps for every frame of that
+    view). Values (M, C) and with ``gradient`` ``∂value/∂(u, v)`` (M, C, 2), else empty."""
     index, fc, fr = bilinear_taps(images.shape[1:3], uv)
     frac = np.concatenate([fc, fr], axis=1)
-    return sample_bilinear(images, frame, np.arange(len(uv)), index, frac, False)[0]
+    return sample_bilinear(images, frame, obs_pair, index, frac, gradient)
 
 
 Taps = tuple[np.ndarray, np.ndarray, np.ndarray]

@@ -23,7 +23,7 @@ from reconstruct.optimise.checkpoint import Checkpoint, OptimiseState
 from reconstruct.optimise.cost import JointCost, Robust
 from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
 from reconstruct.optimise.problem import Frames, LightMode, Observations, Problem, Rig, Weights
-from reconstruct.optimise.sampling import bilinear_values, blur_frames, taps_valid
+from reconstruct.optimise.sampling import blur_frames, sample_pairs, taps_valid
 from reconstruct.optimise.solver import (
     PRECONDITIONERS,
     IterationRecord,
@@ -263,7 +263,7 @@ def build_problem(
                 continue
             uv = inp.rig.intrinsics[c].project_camera(inp.rig.poses[c].to_camera(X[vertex[idx]]))
             keep[idx] &= taps_valid(fr.valid, frame[idx], uv, cfg.margin_px)
-            observed[idx] = bilinear_values(fr.images, frame[idx], uv)
+            observed[idx] = sample_pairs(fr.images, frame[idx], np.arange(idx.size), uv, False)[0]
     s = shading(X[vertex], normals[vertex], P[view])
     keep &= s > 0
     centres = np.stack([pose.center for pose in inp.rig.poses])

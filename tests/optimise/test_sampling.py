@@ -10,8 +10,8 @@ from reconstruct.camera import Intrinsics, Pose
 from reconstruct.optimise.sampling import (
     bilinear,
     bilinear_taps,
-    bilinear_values,
     project_with_jacobian,
+    sample_pairs,
     sample_taps,
     taps_valid,
 )
@@ -122,5 +122,7 @@ def test_compiled_sampler_matches_the_numpy_one(dtype: type) -> None:
     assert np.allclose(grad, want_grad, rtol=1e-6, atol=1e-6)
     value, grad = sample_bilinear(images, frame, obs_pair, index, frac, False)
     assert np.allclose(value, want, rtol=1e-6, atol=1e-6) and grad.size == 0
-    # the observation set's values-only sampling (one tap set per observation)
-    assert np.allclose(bilinear_values(images, frame, uv[obs_pair]), want, rtol=1e-6, atol=1e-6)
+    # the same through sample_pairs (taps from the pairs' pixel coords)
+    value, grad = sample_pairs(images, frame, obs_pair, uv, True)
+    assert np.allclose(value, want, rtol=1e-6, atol=1e-6)
+    assert np.allclose(grad, want_grad, rtol=1e-6, atol=1e-6)
