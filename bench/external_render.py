@@ -49,10 +49,15 @@ def mitsuba(variant: str | None = None) -> Any:
     faster), else ``scalar_rgb``. A missing package is one clear error."""
     if "mi" in _STATE:
         return _STATE["mi"]
-    if "DRJIT_LIBLLVM_PATH" not in os.environ:
+    llvm = "DRJIT_LIBLLVM_PATH" in os.environ
+    if not llvm:
         found = newest_libllvm()
         if found:
             os.environ["DRJIT_LIBLLVM_PATH"] = found
+            llvm = True
+    # Without a usable libLLVM, Dr.Jit finds an older one itself and aborts the process
+    # (LLVM 15: "cannot select fminimum"), which no `except` catches: scalar only then.
+    names = [variant] if variant else [v for v in VARIANTS if llvm or not v.startswith("llvm")]
     try:
         import mitsuba as mi
     except ImportError as exc:
@@ -60,7 +65,7 @@ def mitsuba(variant: str | None = None) -> Any:
             "the external-renderer benchmark needs Mitsuba 3 (not installed)",
             "pip install 'spectral-rig[external]'",
         ) from exc
-    for name in [variant] if variant else VARIANTS:
+    for name in names:
         try:
             mi.set_variant(name)
             mi.load_dict({"type": "diffuse"})  # a JIT variant fails here without libLLVM

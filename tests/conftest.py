@@ -9,6 +9,9 @@ import pytest
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 os.environ.setdefault("MPLBACKEND", "Agg")
+# `rig reconstruct` and friends compile the numba kernels in a child process on a cold cache
+# (rig/warmup.py); the suite compiles in-process instead, and tests/test_warmup.py tests the step.
+os.environ.setdefault("SPECTRAL_RIG_WARMUP", "0")
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("SPECTRAL_RIG_SHARED", REPO.parent / "shared")) / "data"

@@ -11,6 +11,7 @@ from calibration.errors import RigError
 from reconstruct.pipeline import load_config
 from rig.commands.reconstruct import EXIT_SKIPPED_FRAMES
 from rig.outpaths import output_file
+from rig.warmup import compile_kernels_once
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -81,6 +82,7 @@ def handle(args: argparse.Namespace) -> int:
     sessions = collect(args.sessions, args.list_file)
     config = load_config(args.config)
     console = Console(stderr=True)
+    compile_kernels_once(console)  # once, not in every worker
     outcomes = run_batch(
         sessions, config, args.force, args.workers, args.scheduler, args.verbose, console
     )

@@ -12,6 +12,7 @@ from calibration.errors import RigError
 from rig.capture import CaptureStopped, run_capture
 from rig.outpaths import output_dir
 from rig.profile import shipped_profiles
+from rig.warmup import compile_kernels_once
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -85,6 +86,7 @@ def reconstruct(session: Path) -> int:
             "the reconstruction pipeline (reconstruct.pipeline) is not available",
             f"the frames are safe; run `rig reconstruct {session}` once it is installed",
         ) from exc
+    compile_kernels_once()
     pipeline.run_reconstruction(session)
     print(session / "recon")
     return 0

@@ -25,6 +25,7 @@ from reconstruct.poses import SUMMARY as POSE_SUMMARY
 from reconstruct.runlog import run_logged
 from rig.capture import run_capture
 from rig.outpaths import output_dir
+from rig.warmup import compile_kernels_once
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -71,6 +72,7 @@ def handle(args: argparse.Namespace) -> int:
         "subdivide": {"max_faces": 60000},
         "optimise": {"outer_iterations": 2, "light_iterations": 10, "joint_iterations": 8},
     }
+    compile_kernels_once(console)
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     with Progress(

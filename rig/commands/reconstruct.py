@@ -16,6 +16,7 @@ from reconstruct.pipeline import Reconstruction, load_config
 from reconstruct.run_status import describe, read_status
 from reconstruct.runlog import run_logged
 from reconstruct.session import RECON_DIR
+from rig.warmup import compile_kernels_once
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -82,6 +83,7 @@ def handle(args: argparse.Namespace) -> int:
             f"--initial-mesh {args.initial_mesh} is not a file", "give a PLY, OBJ, STL, OFF or GLB"
         )
     config = load_config(args.config)
+    compile_kernels_once(console)
     rec = run_logged(args.session, config, args.initial_mesh, args.verbose, console)
     summary(console, rec)
     print(rec.recon_dir)
