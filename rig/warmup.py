@@ -95,9 +95,11 @@ def compile_kernels_once(console: Console | None = None, command: list[str] | No
         "compiling the numerical kernels once for this install (a tiny simulated "
         "reconstruction in a separate process, 1–3 min), so that this run only loads them"
     )
-    waiting = console.status(message) if console is not None else nullcontext()
-    if console is None:
+    if console is not None:  # a line that stays in logs, and a spinner on a terminal
+        console.print(message, highlight=False)
+    else:
         log.info(message)
+    waiting = console.status("compiling kernels") if console is not None else nullcontext()
     try:
         with waiting:
             proc = subprocess.run(

@@ -37,8 +37,9 @@ def counting_child(runs: Path, code: int = 0) -> list[str]:
 
 def test_a_finished_child_stamps_the_cache_and_is_not_run_again(stamp: Path, tmp_path: Path):
     runs = tmp_path / "runs.txt"
-    console = Console(file=io.StringIO())
+    console = Console(file=io.StringIO(), width=200)
     assert warmup.compile_kernels_once(console, command=counting_child(runs))
+    assert "compiling the numerical kernels once" in console.file.getvalue()
     assert json.loads(stamp.read_text())["key"] == warmup.warmup_key()
     assert warmup.compile_kernels_once(command=counting_child(runs))
     assert runs.read_text().splitlines() == ["run"]
