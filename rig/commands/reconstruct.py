@@ -15,7 +15,7 @@ from reconstruct.decode import list_unusable
 from reconstruct.pipeline import Reconstruction, load_config
 from reconstruct.run_status import describe, read_status
 from reconstruct.runlog import run_logged
-from reconstruct.session import RECON_DIR
+from reconstruct.session import RECON_DIR, Session
 from rig.warmup import compile_kernels_once
 
 
@@ -83,6 +83,7 @@ def handle(args: argparse.Namespace) -> int:
             f"--initial-mesh {args.initial_mesh} is not a file", "give a PLY, OBJ, STL, OFF or GLB"
         )
     config = load_config(args.config)
+    Session.open(args.session)  # a wrong path fails now, not after the kernel warm-up
     compile_kernels_once(console)
     rec = run_logged(args.session, config, args.initial_mesh, args.verbose, console)
     summary(console, rec)
