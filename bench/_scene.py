@@ -1,6 +1,7 @@
 """Synthetic solver scenes of an exact vertex count: a detailed bumpy sphere painted with the
 24 ColorChecker reflectances, cameras on two rings with the light on the camera plate, images
-rendered with the one forward model (:mod:`reconstruct.render`). Cached as ``.npz`` so the timed
+rendered with the one forward model (:mod:`reconstruct.model.render`).
+Cached as ``.npz`` so the timed
 solve runs in a fresh process that only loads its input."""
 
 from __future__ import annotations
@@ -15,12 +16,12 @@ from calibration.basis import default_basis
 from calibration.defaults import (
     colorchecker_reflectances,
 )
-from reconstruct.camera import Intrinsics, Pose
+from reconstruct.model.camera import Intrinsics, Pose
+from reconstruct.model.raycast import RayCaster
+from reconstruct.model.render import render_image
 from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.problem import Frames, Rig
 from reconstruct.optimise.synthetic import SyntheticScene, default_responses
-from reconstruct.raycast import RayCaster
-from reconstruct.render import render_image
 
 RADIUS_M = 0.05
 DISTANCE_M = 0.3

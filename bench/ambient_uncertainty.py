@@ -1,12 +1,12 @@
 """Ambient subtraction and per-vertex uncertainty on a synthetic image scene with known truth.
 
-Three solves of the same bumpy sphere (images, sensor-like noise, a perturbed start mesh):
-no room light; a uniform illuminant-A room light at ``--level`` of the bulb left in the frames;
-the same with each view's ambient frame subtracted (:func:`reconstruct.ambient.subtract_ambient`,
-the pipeline's code). Reports the spectral RMSE over observed vertices and, for the solves with
-a dark or subtracted room, how often the truth lies inside the ±2σ band (per vertex and band,
-and per vertex over all bands), the calibration curve and the Spearman rank correlation between
-the predicted std and the actual error.
+Three solves of the same bumpy sphere (images, sensor-like noise, a perturbed start mesh): no room
+light; a uniform illuminant-A room light at ``--level`` of the bulb left in the frames; the same
+with each view's ambient frame subtracted (:func:`reconstruct.frames.ambient.subtract_ambient`, the
+pipeline's code). Reports the spectral RMSE over observed vertices and, for the solves with a dark
+or subtracted room, how often the truth lies inside the ±2σ band (per vertex and band, and per
+vertex over all bands), the calibration curve and the Spearman rank correlation between the
+predicted std and the actual error.
 
     python -m bench.ambient_uncertainty --out bench/results/ambient_uncertainty
     python -m bench.ambient_uncertainty --perturb 0   # start at the true shape
@@ -28,7 +28,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from scipy.stats import norm, spearmanr
 
-from reconstruct.ambient import subtract_ambient
+from reconstruct.frames.ambient import subtract_ambient
 from reconstruct.optimise.problem import Frames
 from reconstruct.optimise.steps import OptimiseResult, OptimiseSettings, optimise
 from reconstruct.optimise.synthetic import SyntheticScene, make_scene, perturb

@@ -79,7 +79,7 @@ BUDGETS: dict[str, dict[str, Any]] = {
 
 def distances(points: np.ndarray, mesh_path: Path) -> np.ndarray:
     """Distance of each point to the surface of the mesh at ``mesh_path``."""
-    from reconstruct.evaluate import load_mesh, surface_distance
+    from reconstruct.outputs.evaluate import load_mesh, surface_distance
 
     d, _, _ = surface_distance(points, load_mesh(mesh_path))
     return np.asarray(d)
@@ -87,7 +87,7 @@ def distances(points: np.ndarray, mesh_path: Path) -> np.ndarray:
 
 def shape_stats(mesh_path: Path, truth: Path) -> dict[str, float]:
     """Accuracy (mesh -> truth) and completeness (truth -> mesh): mean, median, p90 in m."""
-    from reconstruct.evaluate import load_mesh
+    from reconstruct.outputs.evaluate import load_mesh
 
     mesh, gt = load_mesh(mesh_path), load_mesh(truth)
     acc = distances(np.asarray(mesh.vertices, dtype=float), truth)
@@ -105,8 +105,8 @@ def shape_stats(mesh_path: Path, truth: Path) -> dict[str, float]:
 def per_patch_rmse(npz: Path, out: Path, truth: Path) -> dict[int, float]:
     """Mean spectral RMSE of the observed vertices of each ColorChecker patch (a vertex takes
     the patch of its nearest true vertex)."""
-    from reconstruct import export
-    from reconstruct.evaluate import load_mesh
+    from reconstruct.outputs import export
+    from reconstruct.outputs.evaluate import load_mesh
 
     data = export.read_reflectance_npz(npz)
     rmse = np.load(out / "spectral_rmse_per_vertex.npy")
@@ -123,7 +123,7 @@ def run_scene(
 ) -> dict[str, Any]:
     """Render (or reuse) the session, reconstruct it, score it and the oracle."""
     from bench.paper_sim import _score, do_oracle
-    from reconstruct.pipeline import run_reconstruction
+    from reconstruct.run.pipeline import run_reconstruction
 
     folder = out / spec.name
     session = folder / "session"
@@ -141,7 +141,7 @@ def run_scene(
     final = _score(session, rec.reflectance_path, final_dir, positions, offset=True)
     (folder / "oracle").mkdir(parents=True, exist_ok=True)
     oracle = do_oracle(session, None, folder / "oracle", config)
-    from reconstruct import export
+    from reconstruct.outputs import export
 
     final_mesh = final_dir / "final_mesh.ply"
     npz = export.read_reflectance_npz(rec.reflectance_path)
@@ -252,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
     cache = a.cache or a.out / "cache"
     config = dict(BUDGETS[budget])
     if a.config is not None:
-        from reconstruct.pipeline import load_config
+        from reconstruct.run.pipeline import load_config
 
         for section, values in load_config(a.config).items():
             config[section] = {**config.get(section, {}), **values}

@@ -25,9 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from calibration.errors import RigError
-from reconstruct.camera import Intrinsics, Pose
-from reconstruct.render import vertex_normals
+from core.errors import RigError
+from reconstruct.model.camera import Intrinsics, Pose
+from reconstruct.model.render import vertex_normals
 
 _STATE: dict[str, Any] = {}
 VARIANTS = ("llvm_ad_rgb", "scalar_rgb")

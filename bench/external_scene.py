@@ -18,9 +18,9 @@ import numpy as np
 import trimesh
 
 from calibration.defaults import colorchecker_reflectances
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID
 from calibration.spectra import resample
+from core.errors import RigError
 from drivers.sim.scene import Scene
 
 REPO = Path(__file__).resolve().parents[1]

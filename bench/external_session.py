@@ -22,13 +22,13 @@ from rich.console import Console
 
 from bench.external_render import ShadingRenderer, compose
 from bench.external_scene import SceneSpec, camera_ssf, lamp_spd, load_mesh, painted_scene
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID
 from calibration.store import CalibrationStore
+from core.errors import RigError
 from drivers.sim.camera import SimCamera, colour_matrix
 from drivers.sim.light import SimLight
 from drivers.sim.scene import Scene
-from reconstruct import forward
+from reconstruct.model import forward
 
 # The bulb's channel levels the two (or three) illuminations are switched with; each name is
 # mapped to its measured lamp SPD in the session's calibration store.

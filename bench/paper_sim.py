@@ -14,7 +14,8 @@ point noise and a smooth wave, re-meshed by Poisson), then
 * oracle: true shape and true light positions, reflectance per vertex by least squares from the
   same images (shadows and shading known) — the best the data allows.
 
-Each runs in its own interpreter (its own peak RSS) and is scored by ``reconstruct.evaluate``.
+Each runs in its own interpreter (its own peak RSS) and is scored by
+``reconstruct.outputs.evaluate``.
 
     python -m bench.paper_sim              # blob + torus, 40 views, 640x480
     python -m bench.paper_sim --quick      # smoke size
@@ -97,8 +98,8 @@ def do_capture(profile: Path, session: Path, seed: int) -> dict[str, Any]:
 
 def do_initial(session: Path, out: Path, depth: int, points: int, seed: int) -> dict[str, Any]:
     """The true shape as an MVS-quality mesh (Poisson of noisy, wavy samples)."""
-    from reconstruct.evaluate import load_mesh
     from reconstruct.optimise.synthetic import mvs_like_mesh
+    from reconstruct.outputs.evaluate import load_mesh
 
     t0 = time.perf_counter()
     gt = load_mesh(session / "ground_truth" / "mesh.ply")
@@ -124,9 +125,9 @@ def _truth(session: Path) -> tuple[Path, Path, np.ndarray, np.ndarray]:
 def _inputs(session: Path, initial: Path | None, config: dict[str, Any]) -> tuple[Any, Any]:
     """The decoded frames, rig and calibration as the optimiser sees them (stages cached)."""
     from calibration.basis import default_basis
-    from reconstruct.front import run_front
-    from reconstruct.pipeline import optimiser_input
-    from reconstruct.session import Session
+    from core.session import Session
+    from reconstruct.run.front import run_front
+    from reconstruct.run.pipeline import optimiser_input
 
     front = run_front(session, {k: v for k, v in config.items() if k != "optimise"}, initial)
     return front, optimiser_input(front, Session.open(session), default_basis())
@@ -135,9 +136,9 @@ def _inputs(session: Path, initial: Path | None, config: dict[str, Any]) -> tupl
 def _score(
     session: Path, npz: Path, out: Path, light_positions: np.ndarray | None, offset: bool
 ) -> dict[str, Any]:
-    """reconstruct.evaluate's metrics plus the median spectral RMSE and the light error."""
-    from reconstruct import export
-    from reconstruct.evaluate import evaluate
+    """reconstruct.outputs.evaluate's metrics plus the median spectral RMSE and the light error."""
+    from reconstruct.outputs import export
+    from reconstruct.outputs.evaluate import evaluate
 
     gt_mesh, gt_refl, gt_offset, gt_lights = _truth(session)
     ev = evaluate(npz, gt_mesh, gt_refl, gt_offset if offset else None, out)
@@ -165,12 +166,12 @@ def accuracy_map(npz: Path, gt_mesh: Path, path: Path, vmax_m: float = 0.002) ->
     views lit from the eye — the paper's accuracy error maps."""
     import matplotlib
 
-    from reconstruct import export, plots
-    from reconstruct.camera import Intrinsics, Pose
-    from reconstruct.evaluate import load_mesh, surface_distance
-    from reconstruct.raycast import RayCaster
-    from reconstruct.relight import encode_srgb
-    from reconstruct.render import render_image
+    from reconstruct.model.camera import Intrinsics, Pose
+    from reconstruct.model.raycast import RayCaster
+    from reconstruct.model.render import render_image
+    from reconstruct.outputs import export, plots
+    from reconstruct.outputs.evaluate import load_mesh, surface_distance
+    from reconstruct.outputs.relight import encode_srgb
 
     data = export.read_reflectance_npz(npz)
     X, F = np.asarray(data["vertices"], dtype=float), np.asarray(data["faces"], dtype=np.int64)
@@ -196,8 +197,8 @@ def _write_npz(
     path: Path, X: np.ndarray, F: np.ndarray, refl: np.ndarray, seen: np.ndarray
 ) -> Path:
     from calibration.basis import default_basis
-    from reconstruct import export
     from reconstruct.optimise.mesh import vertex_normals
+    from reconstruct.outputs import export
 
     basis = default_basis()
     normals, _ = vertex_normals(X, F)
@@ -213,8 +214,8 @@ def _visible_samples(
     """(vertex, frame, uv) for every vertex seen by a frame's camera, on valid pixels."""
     import trimesh
 
+    from reconstruct.geometry.visibility import compute_visibility
     from reconstruct.optimise.sampling import taps_valid
-    from reconstruct.visibility import compute_visibility
 
     rig, fr = inp.rig, inp.frames
     views = range(rig.n_views)
@@ -241,8 +242,8 @@ def do_baseline(
 ) -> dict[str, Any]:
     """(a) per-pixel 2-D estimation on every frame, averaged per vertex of the initial mesh."""
     from calibration.estimation import estimate_reflectance
-    from reconstruct.evaluate import load_mesh
     from reconstruct.optimise.sampling import bilinear
+    from reconstruct.outputs.evaluate import load_mesh
 
     t0 = time.perf_counter()
     front, inp = _inputs(session, initial, config)
@@ -298,7 +299,7 @@ def do_joint(
     session: Path, initial: Path | None, out: Path, config: dict[str, Any]
 ) -> dict[str, Any]:
     """(b) the full pipeline (front stages + joint optimisation + export)."""
-    from reconstruct.pipeline import run_reconstruction
+    from reconstruct.run.pipeline import run_reconstruction
 
     # A finished optimisation checkpoint of an earlier run would be resumed, not timed.
     shutil.rmtree(session / "recon" / "optimise", ignore_errors=True)
@@ -321,12 +322,12 @@ def do_oracle(
 ) -> dict[str, Any]:
     """True shape and light; α per vertex by least squares over its observations."""
     from calibration.estimation import estimate_reflectance
-    from reconstruct.evaluate import load_mesh
-    from reconstruct.forward import shading
+    from reconstruct.model.forward import shading
+    from reconstruct.model.raycast import RayCaster
     from reconstruct.optimise.mesh import vertex_normals
     from reconstruct.optimise.sampling import bilinear
     from reconstruct.optimise.steps import OptimiseSettings
-    from reconstruct.raycast import RayCaster
+    from reconstruct.outputs.evaluate import load_mesh
 
     t0 = time.perf_counter()
     _, inp = _inputs(session, initial, config)
@@ -524,7 +525,7 @@ def main(argv: list[str] | None = None) -> int:
                 shutil.copy(png, args.out / f"paper_sim_{scene}_{mode}_{png.name}")
     notes = [
         "accuracy: mean distance reconstructed vertices → true surface; completeness: true "
-        "vertices → reconstructed surface (reconstruct.evaluate)",
+        "vertices → reconstructed surface (reconstruct.outputs.evaluate)",
         "spectral RMSE: per vertex over 400–700 nm against the true reflectance at the closest "
         "true surface point, over observed vertices",
         "light position error: mean over views of |p_c − p_c,true| (the joint method's light "

@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from calibration.defaults import training_reflectances
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID, SpectralGrid
+from core.errors import RigError
 
 
 @dataclass

@@ -12,9 +12,9 @@ import colour
 import numpy as np
 
 from calibration.defaults import cie_illuminant
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID, SpectralGrid
 from calibration.spectra import resample
+from core.errors import RigError
 
 CMFS = "CIE 1931 2 Degree Standard Observer"
 

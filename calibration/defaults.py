@@ -22,9 +22,9 @@ import colour
 import numpy as np
 from colour.characterisation.aces_it import ROOT_RESOURCES_RAWTOACES
 
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID, SpectralGrid
 from calibration.spectra import resample
+from core.errors import RigError
 
 DEFAULT_CAMERA = "Canon EOS 5D Mark II"
 

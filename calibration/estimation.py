@@ -18,8 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 from calibration.basis import SpectralBasis
-from calibration.errors import RigError
 from calibration.spectra import second_difference_matrix
+from core.errors import RigError
 
 DEFAULT_SMOOTHNESS = 0.1
 """Relative weight; robust with ~1 % camera noise (see calibration.selection for tuning)."""

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.errors import RigError
+from core.errors import RigError
 
 
 @dataclass(frozen=True)

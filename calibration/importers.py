@@ -28,8 +28,8 @@ import colour
 import numpy as np
 
 from calibration import defaults
-from calibration.errors import RigError
 from calibration.spectra import validate_spectrum
+from core.errors import RigError
 
 FORMATS = ("auto", "csv", "oceanview", "spectrawiz")
 SPECTRAWIZ_SUFFIXES = {

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibration.basis import SpectralBasis
-from calibration.errors import RigError
 from calibration.estimation import DEFAULT_SMOOTHNESS, estimation_matrix, response_matrices
+from core.errors import RigError
 
 MAX_SUBSETS = 20000
 SMOOTHNESS_GRID = tuple(float(x) for x in np.logspace(-4, 1, 11))

@@ -24,8 +24,8 @@ import colour
 import numpy as np
 import numpy.typing as npt
 
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID, SpectralGrid
+from core.errors import RigError
 
 NEGATIVE_TOLERANCE = 0.05
 """Negative values down to this fraction of the peak are treated as noise and clipped to 0."""

@@ -30,10 +30,10 @@ import numpy as np
 import yaml
 
 from calibration import defaults
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID, SpectralGrid
 from calibration.spectra import resample, validate_spectrum
-from calibration.yamlio import load_yaml, yaml_problem
+from core.errors import RigError
+from core.yamlio import load_yaml, yaml_problem
 
 FORMAT = "spectral-rig-calibration/1"
 ENV_STORE = "SPECTRAL_RIG_STORE"

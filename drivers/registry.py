@@ -12,7 +12,7 @@ import logging
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.lights.k8062 import K8062_PID, VELLEMAN_VID
 from drivers.lights.magichome import PORT as MAGIC_HOME_PORT
 from drivers.lights.udmx import UDMX_PID, UDMX_PRODUCT, UDMX_VID

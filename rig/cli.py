@@ -16,7 +16,7 @@ from rich.console import Console
 from rich.logging import RichHandler
 from rich.text import Text
 
-from calibration.errors import RigError
+from core.errors import RigError
 from rig import __version__
 
 # Subcommand -> module in rig.commands exposing ``add_parser(subparsers)``.

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from calibration.errors import RigError
+from core.errors import RigError
 
 
 def _file_ancestor(path: Path) -> Path | None:

@@ -18,9 +18,9 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from calibration.errors import RigError
-from calibration.yamlio import read_yaml
-from reconstruct.board import BoardSpec
+from core.errors import RigError
+from core.yamlio import read_yaml
+from reconstruct.poses.board import BoardSpec
 
 DEVICE_KINDS = ("light", "camera", "projector", "spectrometer")
 # Drivers the capture routes itself; the rest go to ``drivers.registry``.

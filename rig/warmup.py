@@ -31,8 +31,8 @@ from rich.console import Console
 
 KERNEL_MODULES = (
     "reconstruct.optimise.kernels",
-    "reconstruct.dense.plane_cost",
-    "reconstruct.dense.board_silhouette",
+    "reconstruct.initial_mesh.dense.plane_cost",
+    "reconstruct.initial_mesh.dense.board_silhouette",
 )
 STAMP_FILE = "spectral-rig-warmup.json"
 TIMEOUT_S = 1800
@@ -129,7 +129,7 @@ def compile_kernels_once(console: Console | None = None, command: list[str] | No
 
 def reconstruct_tiny_capture(folder: Path) -> None:
     """The child's work: a tiny sim capture reconstructed end to end in ``folder``."""
-    from reconstruct.pipeline import run_reconstruction
+    from reconstruct.run.pipeline import run_reconstruction
     from rig.capture import run_capture
     from rig.commands.demo import demo_profile
 

@@ -25,10 +25,10 @@ from rich.console import Console
 from rich.table import Table
 
 from calibration import defaults
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID
 from calibration.spectra import resample
 from calibration.store import CalibrationStore
+from core.errors import RigError
 from drivers.protocols import Camera, LightSource, Spectrometer, Spectrum
 from rig.capture.devices import RigDevices, device_errors, open_devices, open_sim
 from rig.profile import Profile, load_profile

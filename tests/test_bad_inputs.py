@@ -375,7 +375,7 @@ def test_bad_input_is_one_clear_line(
 
 def test_errors_print_brackets_literally(capsys: pytest.CaptureFixture[str]) -> None:
     """Rich markup is off for messages: `[/x]` does not crash, `[gphoto2]` is not eaten."""
-    from calibration.errors import RigError
+    from core.errors import RigError
     from rig import cli
 
     def fail(_: object) -> int:

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.errors import RigError
-from reconstruct import forward, render
-from reconstruct.camera import Intrinsics, Pose
-from reconstruct.raycast import RayCaster
+from core.errors import RigError
+from reconstruct.model import forward, render
+from reconstruct.model.camera import Intrinsics, Pose
+from reconstruct.model.raycast import RayCaster
 
 N_L = 31
 

@@ -9,7 +9,7 @@ import shutil
 from collections.abc import Callable
 from pathlib import Path
 
-from calibration.errors import RigError
+from core.errors import RigError
 
 log = logging.getLogger(__name__)
 

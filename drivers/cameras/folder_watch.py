@@ -11,7 +11,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.cameras.exif import read_exif
 from drivers.cameras.files import copy_durably, target_path
 from drivers.protocols import CapturedFrame

@@ -16,7 +16,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, TypeVar
 
-from calibration.errors import MissingDependencyError, RigError
+from core.errors import MissingDependencyError, RigError
 from drivers.cameras.exif import read_exif
 from drivers.cameras.files import target_path, write_durably
 from drivers.cameras.timeouts import call_with_timeout

@@ -10,7 +10,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.cameras.exif import read_exif
 from drivers.cameras.files import copy_durably, target_path
 from drivers.cameras.folder_watch import RAW_EXTENSIONS, frame_from_files, list_files

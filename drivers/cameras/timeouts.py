@@ -10,7 +10,7 @@ import threading
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-from calibration.errors import RigError
+from core.errors import RigError
 
 T = TypeVar("T")
 

@@ -12,7 +12,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.transports.base import Transport
 
 log = logging.getLogger("drivers.lights")

@@ -11,7 +11,7 @@ from abc import abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.lights.base import LightBase, to_byte
 from drivers.transports.base import Transport
 

@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.lights.dmx import DMX_SLOTS, DmxLight
 from drivers.transports.base import NotAnsweringError, Transport
 

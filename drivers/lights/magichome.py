@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.lights.base import LightBase, colour_and_white, to_byte
 from drivers.transports.base import NotAnsweringError, Transport
 

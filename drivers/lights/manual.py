@@ -10,7 +10,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.lights.base import DEFAULT_CHANNELS, LightBase
 
 

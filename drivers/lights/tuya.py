@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from calibration.errors import MissingDependencyError, RigError
+from core.errors import MissingDependencyError, RigError
 from drivers.lights.base import LightBase, colour_and_white, to_byte
 
 CHANNELS = ("r", "g", "b", "c", "w")

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from calibration.errors import MissingDependencyError, RigError
+from core.errors import MissingDependencyError, RigError
 
 
 def to_rgb8(image: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from calibration.defaults import cie_illuminant, illumination_spd
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.sim.config_keys import reject_unknown_keys
 from drivers.sim.light import SimLight
 

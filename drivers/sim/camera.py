@@ -27,18 +27,18 @@ from calibration.defaults import (
     cie_illuminant,
     colorchecker_reflectances,
 )
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID
 from calibration.spectra import resample
+from core.errors import RigError
 from drivers.protocols import CapturedFrame
 from drivers.sim.config_keys import reject_unknown_keys
 from drivers.sim.dng import write_dng
 from drivers.sim.light import SimLight
 from drivers.sim.projector import SimProjector
 from drivers.sim.scene import Scene
-from reconstruct import forward, render
-from reconstruct.camera import Intrinsics, Pose
-from reconstruct.raycast import RayCaster
+from reconstruct.model import forward, render
+from reconstruct.model.camera import Intrinsics, Pose
+from reconstruct.model.raycast import RayCaster
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from calibration.errors import RigError
+from core.errors import RigError
 
 
 def reject_unknown_keys(data: Mapping[str, Any], known: Iterable[str], where: str) -> None:

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from calibration.defaults import default_illuminations, illumination_spd, rgbcw_channel_spds
-from calibration.errors import RigError
+from core.errors import RigError
 
 
 class SimLight:

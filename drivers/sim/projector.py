@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 
 from calibration.defaults import rgbcw_channel_spds
-from calibration.errors import RigError
-from reconstruct.camera import Intrinsics, Pose
+from core.errors import RigError
+from reconstruct.model.camera import Intrinsics, Pose
 
 
 class SimProjector:

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.sim.ambient import room_spd
 from drivers.sim.camera import SensorConfig, SimCamera
 from drivers.sim.config_keys import reject_unknown_keys
@@ -46,8 +46,8 @@ from drivers.sim.trajectory import (
     placement_poses,
     ring_poses,
 )
-from reconstruct.camera import Intrinsics, Pose, write_colmap_text
-from reconstruct.render import GroundPlane
+from reconstruct.model.camera import Intrinsics, Pose, write_colmap_text
+from reconstruct.model.render import GroundPlane
 
 _KEYS = {
     "scene",

@@ -23,8 +23,8 @@ import trimesh
 import yaml
 
 from calibration.defaults import colorchecker_reflectances
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID, SpectralGrid
+from core.errors import RigError
 
 SCENES = ("blob", "torus", "chart")
 _CHART_BORDER = 0.03  # reflectance of the card between patches (near black)

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID, SpectralGrid
+from core.errors import RigError
 from drivers.protocols import Spectrum
 
 

@@ -18,9 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.sim.config_keys import reject_unknown_keys
-from reconstruct.camera import Pose
+from reconstruct.model.camera import Pose
 
 
 @dataclass(frozen=True)

@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from calibration.errors import RigError
 from calibration.importers import read_spectrum
+from core.errors import RigError
 from drivers.protocols import Spectrum
 
 

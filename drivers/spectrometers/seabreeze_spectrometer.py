@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from calibration.errors import MissingDependencyError, RigError
+from core.errors import MissingDependencyError, RigError
 from drivers.protocols import Spectrum
 
 log = logging.getLogger(__name__)

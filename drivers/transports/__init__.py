@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.transports.base import NotAnsweringError, Transport, redact
 
 __all__ = ["NotAnsweringError", "Transport", "open_transport", "redact", "TRANSPORT_TYPES"]

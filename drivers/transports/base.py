@@ -14,7 +14,7 @@ from collections.abc import Mapping, Sequence
 from types import TracebackType
 from typing import Any
 
-from calibration.errors import RigError
+from core.errors import RigError
 
 log = logging.getLogger("drivers.transport")
 

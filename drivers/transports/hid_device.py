@@ -10,7 +10,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.transports.base import Transport
 
 HID_UDEV_HINT = (

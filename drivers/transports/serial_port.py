@@ -6,7 +6,7 @@ import errno
 import importlib
 from typing import Any
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.transports.base import Transport
 
 UDEV_HINT = (

@@ -9,7 +9,7 @@ import subprocess
 import tempfile
 from collections.abc import Sequence
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.transports.base import Transport
 
 

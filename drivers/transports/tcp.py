@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import socket
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.transports.base import Transport
 
 

@@ -13,7 +13,7 @@ import importlib
 import struct
 from typing import Any
 
-from calibration.errors import MissingDependencyError, RigError
+from core.errors import MissingDependencyError, RigError
 from drivers.transports.base import Transport
 
 USB_UDEV_HINT = (

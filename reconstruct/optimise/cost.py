@@ -5,7 +5,8 @@ Residual blocks (E = Σ r², the paper's cost with no ½):
 
 * rendering (eq. 2, 12): per observation o = (vertex i, frame f), 3 channels,
   ``r_o = k (y(x_i, α_i, p_c) − y_obs(π_c(x_i))) / sqrt(|V(i)|)``; y from
-  :mod:`reconstruct.forward`, y_obs sampled bilinearly at the vertex's projection (disparity cue),
+  :mod:`reconstruct.model.forward`,
+  y_obs sampled bilinearly at the vertex's projection (disparity cue),
   k the rendering unit (``Weights.rendering_scale``) times the frame's noise weight
   (``Frames.weight``, below 1 where an ambient frame was subtracted);
 * spectral smoothness (eq. 14): ``sqrt(γ1) R_s α_i`` with ``R_sᵀR_s = (D B)ᵀ(D B)``;
@@ -29,7 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from calibration.spectra import second_difference_matrix
-from reconstruct.forward import render_values, shading
+from reconstruct.model.forward import render_values, shading
 from reconstruct.optimise.kernels import (
     accumulate_normal_equations,
     gram_products,

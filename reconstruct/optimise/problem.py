@@ -15,8 +15,8 @@ from typing import Literal
 
 import numpy as np
 
-from calibration.errors import RigError
-from reconstruct.camera import Intrinsics, Pose
+from core.errors import RigError
+from reconstruct.model.camera import Intrinsics, Pose
 
 LightMode = Literal["offset", "free"]
 
@@ -26,7 +26,7 @@ class Frames:
     """Captured frames: which view (pose) and illumination each is, and optionally the linear
     images (F, H, W, 3) with their validity masks (F, H, W) (False = saturated/unusable) and a
     relative noise weight per frame (F,) — 1/std relative to a frame with no ambient
-    subtracted (:mod:`reconstruct.ambient`); None: all 1."""
+    subtracted (:mod:`reconstruct.frames.ambient`); None: all 1."""
 
     view: np.ndarray
     illumination: np.ndarray

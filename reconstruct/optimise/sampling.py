@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-from reconstruct.camera import Intrinsics, Pose
+from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.optimise.kernels import project_points, sample_bilinear
 from reconstruct.optimise.problem import Frames
 

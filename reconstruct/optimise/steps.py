@@ -15,10 +15,10 @@ from typing import Any, Literal
 import numpy as np
 
 from calibration.basis import SpectralBasis
-from calibration.errors import RigError
 from calibration.estimation import DEFAULT_SMOOTHNESS, estimate_reflectance
-from reconstruct.config_check import check_types, is_number
-from reconstruct.forward import shading
+from core.errors import RigError
+from reconstruct.model.forward import shading
+from reconstruct.model.raycast import RayCaster
 from reconstruct.optimise.checkpoint import Checkpoint, OptimiseState
 from reconstruct.optimise.cost import JointCost, Robust
 from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
@@ -36,7 +36,7 @@ from reconstruct.optimise.uncertainty import (
     vertex_uncertainty,
 )
 from reconstruct.optimise.weights import edge_scale, photometric_weights
-from reconstruct.raycast import RayCaster
+from reconstruct.run.config_check import check_types, is_number
 
 log = logging.getLogger(__name__)
 # "offset": one shared camera-plate offset (bulb); "free": one position per view (projector);

@@ -23,13 +23,13 @@ from calibration.defaults import (
     rgbcw_channel_spds,
     training_reflectances,
 )
-from reconstruct.camera import Intrinsics, Pose
-from reconstruct.forward import render_values, response_matrix, shading
+from reconstruct.model.camera import Intrinsics, Pose
+from reconstruct.model.forward import render_values, response_matrix, shading
+from reconstruct.model.raycast import RayCaster
+from reconstruct.model.render import render_image, shade, trace_view
 from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.problem import Frames, Rig
 from reconstruct.optimise.steps import OptimiseInput
-from reconstruct.raycast import RayCaster
-from reconstruct.render import render_image, shade, trace_view
 
 
 @dataclass
@@ -209,7 +209,7 @@ def mvs_like_mesh(
     """An initial mesh of MVS quality made from a true one: surface samples with point noise
     (``noise_m``) and a smooth low-frequency displacement along the normal (RMS ``wave_m``),
     re-meshed by screened Poisson at ``depth`` (smoothing and decimating it)."""
-    from reconstruct.dense.poisson import poisson_mesh
+    from reconstruct.initial_mesh.dense.poisson import poisson_mesh
 
     rng = np.random.default_rng(seed)
     p, face = trimesh.sample.sample_surface(mesh, points, seed=seed)

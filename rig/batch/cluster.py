@@ -14,7 +14,7 @@ from contextlib import contextmanager
 import psutil
 from distributed import Client, LocalCluster
 
-from calibration.errors import RigError
+from core.errors import RigError
 
 # What one reconstruction of a demo-sized session (20 views, 60k faces) needs, with margin.
 WORKER_MEMORY = 4 * 2**30

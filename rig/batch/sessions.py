@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-from calibration.errors import RigError
+from core.errors import RigError
 
 
 def read_list(path: Path) -> list[Path]:

@@ -10,7 +10,7 @@ from typing import Any
 from rich.table import Table
 from rich.text import Text
 
-from calibration.errors import RigError
+from core.errors import RigError
 from rig.batch.task import Outcome
 
 FIGURES = (

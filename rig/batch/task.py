@@ -13,11 +13,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from calibration.errors import RigError
-from reconstruct import export, publish
-from reconstruct.decode import list_unusable
-from reconstruct.evaluate import EVALUATION_FILE
-from reconstruct.session import RECON_DIR
+from core.errors import RigError
+from core.session import RECON_DIR
+from reconstruct.frames.decode import list_unusable
+from reconstruct.outputs import export
+from reconstruct.outputs.evaluate import EVALUATION_FILE
+from reconstruct.run import publish
 
 OUTPUTS = (export.MESH_FILE, export.REFLECTANCE_FILE, export.REPORT_FILE)
 
@@ -77,7 +78,7 @@ def reconstruct_session(
     try:
         if not force and is_reconstructed(root):
             return Outcome(session, "skipped", 0.0, report_figures(root / RECON_DIR))
-        from reconstruct.runlog import run_logged  # heavy imports stay in the workers
+        from reconstruct.run.logfile import run_logged  # heavy imports stay in the workers
 
         rec = run_logged(root, config, None, verbosity, terminal=False)
         seconds, figures = time.perf_counter() - t0, report_figures(rec.recon_dir)

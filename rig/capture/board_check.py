@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from reconstruct.board import BoardSpec, board_visibility_report, linear_to_u8
+from reconstruct.poses.board import BoardSpec, board_visibility_report, linear_to_u8
 from rig.capture.frames import RawData
 
 LARGE_SENSOR_PX = 2000  # wider frames get a half-size full look (as LibRaw's half_size)
@@ -44,7 +44,7 @@ def board_image(raw: RawData, binning: int = 1) -> np.ndarray:
     Mosaics: white-balanced and clipped per filter (as LibRaw scales), averaged over each bin,
     or at full size over a sliding CFA period (one of each filter everywhere), then LibRaw's
     default BT.709 curve. Demosaiced/monochrome linear frames (TIFF, NumPy) go through
-    :func:`reconstruct.board.linear_to_u8`."""
+    :func:`reconstruct.poses.board.linear_to_u8`."""
     if raw.cfa_gain is None or raw.cfa_black is None:
         span = max(raw.white - raw.black, 1e-12)
         linear = (raw.values.astype(np.float32) - np.float32(raw.black)) / np.float32(span)

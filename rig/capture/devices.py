@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.protocols import Camera, LightSource, Projector, Spectrometer
-from reconstruct.board import BoardSpec, board_texture
+from reconstruct.poses.board import BoardSpec, board_texture
 from rig.profile import Profile
 
 Ask = Callable[[str], str]

@@ -24,9 +24,9 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
-from calibration.errors import RigError
+from core.errors import RigError
+from core.session import RAW_DIR, FrameRecord
 from drivers.protocols import LightSource
-from reconstruct.session import RAW_DIR, FrameRecord
 from rig.capture.board_check import look_for_board
 from rig.capture.devices import Ask, RigDevices, device_errors
 from rig.capture.frames import INCOMING, ExposureCheck, RawData, check_exposure, store_frame

@@ -10,15 +10,15 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.errors import RigError
-from drivers.protocols import CapturedFrame
-from reconstruct.session import (
+from core.errors import RigError
+from core.session import (
     RAW_DIR,
     FrameRecord,
     append_manifest,
     fsync_dir,
     sha256_file,
 )
+from drivers.protocols import CapturedFrame
 from rig.plans import FrameSpec
 
 INCOMING = ".incoming"  # under raw/: where the camera writes; leftovers go to quarantine/
@@ -240,7 +240,7 @@ def store_frame(
         "camera_serial": captured.camera_serial,
         **dict(captured.extra),
     }
-    if spec.placement is not None:  # reconstruct.procam groups views by it
+    if spec.placement is not None:  # reconstruct.initial_mesh.procam groups views by it
         extra["projector_placement"] = spec.placement
     if len(stored) > 1:
         extra["other_files"] = [{"path": p, "sha256": h} for p, h in stored[1:]]

@@ -18,8 +18,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from calibration.errors import RigError
-from reconstruct.session import (
+from core.errors import RigError
+from core.session import (
     MANIFEST_FILE,
     RAW_DIR,
     FrameRecord,

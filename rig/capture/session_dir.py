@@ -13,9 +13,8 @@ from typing import Any
 
 import yaml
 
-from calibration.errors import RigError
-from calibration.yamlio import load_yaml
-from reconstruct.session import (
+from core.errors import RigError
+from core.session import (
     CALIBRATION_DIR,
     MANIFEST_FILE,
     POSES_DIR,
@@ -23,6 +22,7 @@ from reconstruct.session import (
     SESSION_FILE,
     write_bytes_atomically,
 )
+from core.yamlio import load_yaml
 from rig import __version__
 from rig.capture.frames import INCOMING
 from rig.profile import CalibrationChoice, Profile, parse_profile

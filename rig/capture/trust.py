@@ -9,9 +9,9 @@ import sys
 from collections.abc import Mapping
 from pathlib import Path
 
-from calibration.errors import RigError
+from core.errors import RigError
+from core.session import SESSION_FILE
 from drivers.registry import resolved_transport
-from reconstruct.session import SESSION_FILE
 from rig.capture.devices import Ask
 from rig.profile import Profile
 

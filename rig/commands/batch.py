@@ -7,8 +7,8 @@ from pathlib import Path
 
 from rich.console import Console
 
-from calibration.errors import RigError
-from reconstruct.pipeline import load_config
+from core.errors import RigError
+from reconstruct.run.pipeline import load_config
 from rig.commands.reconstruct import EXIT_SKIPPED_FRAMES
 from rig.outpaths import output_file
 from rig.warmup import compile_kernels_once

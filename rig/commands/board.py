@@ -11,10 +11,10 @@ from pathlib import Path
 
 from rich.console import Console
 
-from calibration.errors import RigError
-from reconstruct.board import PAPER_SIZES_M, BoardSpec, write_sheet
-from reconstruct.board.spec import DEFAULT_DICTIONARY, DEFAULT_MARKER_RATIO, DEFAULT_SQUARES
-from reconstruct.session import write_bytes_atomically
+from core.errors import RigError
+from core.session import write_bytes_atomically
+from reconstruct.poses.board import PAPER_SIZES_M, BoardSpec, write_sheet
+from reconstruct.poses.board.spec import DEFAULT_DICTIONARY, DEFAULT_MARKER_RATIO, DEFAULT_SQUARES
 from rig.outpaths import output_file
 
 

@@ -15,8 +15,8 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID
+from core.errors import RigError
 from rig.outpaths import output_dir, output_file
 
 if TYPE_CHECKING:

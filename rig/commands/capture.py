@@ -8,7 +8,7 @@ from pathlib import Path
 
 from rich.console import Console
 
-from calibration.errors import RigError
+from core.errors import RigError
 from rig.capture import CaptureStopped, run_capture
 from rig.outpaths import output_dir
 from rig.profile import shipped_profiles
@@ -80,10 +80,10 @@ def handle(args: argparse.Namespace) -> int:
 def reconstruct(session: Path) -> int:
     """Run the reconstruction pipeline on a finished session."""
     try:
-        pipeline = importlib.import_module("reconstruct.pipeline")
+        pipeline = importlib.import_module("reconstruct.run.pipeline")
     except ImportError as exc:
         raise RigError(
-            "the reconstruction pipeline (reconstruct.pipeline) is not available",
+            "the reconstruction pipeline (reconstruct.run.pipeline) is not available",
             f"the frames are safe; run `rig reconstruct {session}` once it is installed",
         ) from exc
     compile_kernels_once()

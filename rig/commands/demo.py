@@ -17,12 +17,12 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from calibration.errors import RigError
-from reconstruct.board import umeyama
-from reconstruct.camera import read_colmap_text
-from reconstruct.evaluate import evaluate, load_mesh, surface_distance
-from reconstruct.poses import SUMMARY as POSE_SUMMARY
-from reconstruct.runlog import run_logged
+from core.errors import RigError
+from reconstruct.model.camera import read_colmap_text
+from reconstruct.outputs.evaluate import evaluate, load_mesh, surface_distance
+from reconstruct.poses.board import umeyama
+from reconstruct.poses.stage import SUMMARY as POSE_SUMMARY
+from reconstruct.run.logfile import run_logged
 from rig.capture import run_capture
 from rig.outpaths import output_dir
 from rig.warmup import compile_kernels_once

@@ -8,9 +8,9 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from reconstruct import export
-from reconstruct.evaluate import Evaluation, evaluate
-from reconstruct.session import RECON_DIR
+from core.session import RECON_DIR
+from reconstruct.outputs import export
+from reconstruct.outputs.evaluate import Evaluation, evaluate
 from rig.commands.relight import parse_xyz
 
 

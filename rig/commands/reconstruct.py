@@ -10,12 +10,12 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from calibration.errors import RigError
-from reconstruct.decode import list_unusable
-from reconstruct.pipeline import Reconstruction, load_config
-from reconstruct.run_status import describe, read_status
-from reconstruct.runlog import run_logged
-from reconstruct.session import RECON_DIR, Session
+from core.errors import RigError
+from core.session import RECON_DIR, Session
+from reconstruct.frames.decode import list_unusable
+from reconstruct.run.logfile import run_logged
+from reconstruct.run.pipeline import Reconstruction, load_config
+from reconstruct.run.status import describe, read_status
 from rig.warmup import compile_kernels_once
 
 

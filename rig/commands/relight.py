@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.errors import RigError
-from reconstruct import export
-from reconstruct.poses import load as load_poses
-from reconstruct.relight import Camera, encode_srgb, load_camera_file, relight, write_png
-from reconstruct.session import RECON_DIR
+from core.errors import RigError
+from core.session import RECON_DIR
+from reconstruct.outputs import export
+from reconstruct.outputs.relight import Camera, encode_srgb, load_camera_file, relight, write_png
+from reconstruct.poses.stage import load as load_poses
 from rig.outpaths import output_file
 
 

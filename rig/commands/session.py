@@ -10,7 +10,7 @@ from typing import Any
 
 from rich.console import Console
 
-from reconstruct.session import FrameProblem, Session, sha256_file, verify_frames
+from core.session import FrameProblem, Session, sha256_file, verify_frames
 from rig.capture.frames import INCOMING, record_paths
 from rig.capture.resume import QUARANTINE_DIR, REASONS_FILE
 

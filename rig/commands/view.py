@@ -7,8 +7,8 @@ from pathlib import Path
 
 from rich.console import Console
 
-from calibration.errors import RigError
 from calibration.grid import SpectralGrid
+from core.errors import RigError
 from rig.view.colour import DEFAULT_ILLUMINANTS, illuminant_matrices
 from rig.view.data import load_view_data
 from rig.view.page import build_page

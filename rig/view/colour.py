@@ -10,9 +10,9 @@ import colour
 import numpy as np
 
 from calibration.colorimetry import xyz_weights
-from calibration.errors import RigError
 from calibration.grid import SpectralGrid
-from reconstruct.relight import illuminant_spd
+from core.errors import RigError
+from reconstruct.outputs.relight import illuminant_spd
 
 DEFAULT_ILLUMINANTS = ("D65", "A", "FL2", "FL11", "LED-B3", "LED-V1")
 

@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from calibration.errors import RigError
-from reconstruct.camera import read_colmap_text
-from reconstruct.evaluate import interpolate_at, load_mesh
-from reconstruct.export import REFLECTANCE_FILE, read_reflectance_npz
-from reconstruct.session import RECON_DIR
+from core.errors import RigError
+from core.session import RECON_DIR
+from reconstruct.model.camera import read_colmap_text
+from reconstruct.outputs.evaluate import interpolate_at, load_mesh
+from reconstruct.outputs.export import REFLECTANCE_FILE, read_reflectance_npz
 
 
 @dataclass

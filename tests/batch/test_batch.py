@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from batch_sessions import FAST, copies
 
-from calibration.errors import RigError
+from core.errors import RigError
 from rig.batch.sessions import collect
 from rig.batch.task import is_reconstructed
 from rig.cli import main

@@ -12,7 +12,7 @@ import pycolmap
 import pytest
 from batch_sessions import FAST, copies
 
-from reconstruct.runlog import captured_output
+from reconstruct.run.logfile import captured_output
 from rig.cli import main
 
 GLOG = re.compile(r"^[IWEF]\d{8} \d\d:\d\d:\d\d", re.MULTILINE)  # glog's line prefix

@@ -14,9 +14,9 @@ pytest.importorskip("mitsuba")
 from bench.external_render import ShadingRenderer, compose
 from bench.external_scene import SceneSpec
 from bench.external_session import Size, build_session
-from reconstruct import decode
-from reconstruct.camera import Intrinsics, Pose, project
-from reconstruct.decode import decode_raw
+from reconstruct.frames import decode
+from reconstruct.frames.decode import decode_raw
+from reconstruct.model.camera import Intrinsics, Pose, project
 
 
 def plate(n: int = 41, half: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

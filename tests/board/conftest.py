@@ -14,8 +14,8 @@ import cv2
 import numpy as np
 import pytest
 
-from reconstruct.board import BoardSpec, board_texture
-from reconstruct.camera import Intrinsics, Pose, project
+from reconstruct.model.camera import Intrinsics, Pose, project
+from reconstruct.poses.board import BoardSpec, board_texture
 
 PX_PER_M = 6000.0
 SUPERSAMPLE = 3  # render at 3x and area-average: a real sensor integrates over its pixels

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from reconstruct.board import BoardSpec, detect_board
+from reconstruct.poses.board import BoardSpec, detect_board
 from rig.cli import main
 
 MM_PER_INCH = 25.4

@@ -9,9 +9,9 @@ import cv2
 import numpy as np
 import pytest
 
-from calibration.errors import RigError
-from reconstruct.board import board_visibility_report, detect_board, linear_to_u8
-from reconstruct.camera import Pose, project
+from core.errors import RigError
+from reconstruct.model.camera import Pose, project
+from reconstruct.poses.board import board_visibility_report, detect_board, linear_to_u8
 
 
 @pytest.fixture(scope="module")

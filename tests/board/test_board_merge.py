@@ -9,9 +9,15 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from calibration.errors import RigError
-from reconstruct.board import BoardPoseResult, Similarity, board_poses, merge_with_sfm, umeyama
-from reconstruct.camera import Pose, project
+from core.errors import RigError
+from reconstruct.model.camera import Pose, project
+from reconstruct.poses.board import (
+    BoardPoseResult,
+    Similarity,
+    board_poses,
+    merge_with_sfm,
+    umeyama,
+)
 
 # board frame -> an arbitrary SfM frame (scale 1/0.37 as SfM units are arbitrary)
 TO_SFM = Similarity(
@@ -43,7 +49,7 @@ def test_similarity_moves_a_camera_with_its_scene() -> None:
     """A camera and the points it sees, both carried by the similarity, give the same image."""
     pose = Pose.look_at(np.array([0.3, -0.4, 0.5]), np.zeros(3))
     points = np.random.default_rng(2).uniform(-0.1, 0.1, size=(20, 3))
-    intrinsics = pytest.importorskip("reconstruct.camera").Intrinsics.pinhole(640, 480, 500.0)
+    intrinsics = pytest.importorskip("reconstruct.model.camera").Intrinsics.pinhole(640, 480, 500.0)
     moved = TO_SFM.apply_pose(pose)
     assert np.allclose(moved.center, TO_SFM.apply(pose.center[None])[0])
     assert np.allclose(
@@ -59,7 +65,7 @@ def board_result(scene: Any, captured: tuple) -> BoardPoseResult[int]:
 
 @pytest.fixture(scope="module")
 def captured(scene: Any, render_view: Any, orbit: Any) -> tuple[list[Pose], dict]:
-    from reconstruct.board import detect_board
+    from reconstruct.poses.board import detect_board
 
     rng = np.random.default_rng(21)
     truth = orbit(6, rng)

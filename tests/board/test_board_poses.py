@@ -9,9 +9,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from calibration.errors import RigError
-from reconstruct.board import Detection, board_poses, detect_board
-from reconstruct.camera import Intrinsics, Pose
+from core.errors import RigError
+from reconstruct.model.camera import Intrinsics, Pose
+from reconstruct.poses.board import Detection, board_poses, detect_board
 
 N_VIEWS = 12
 

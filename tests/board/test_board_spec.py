@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import yaml
 
-from calibration.errors import RigError
-from reconstruct.board import BoardSpec, board_texture, detect_board
+from core.errors import RigError
+from reconstruct.poses.board import BoardSpec, board_texture, detect_board
 
 
 def test_fit_paper_a4_fits_inside_margins() -> None:

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from calibration.basis import SpectralBasis, default_basis, pca_basis
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID
 from calibration.importers import read_reflectance_set
 from calibration.spectra import resample
+from core.errors import RigError
 
 
 def test_pca_recovers_a_planted_rank() -> None:

@@ -8,8 +8,8 @@ import pytest
 
 from calibration import defaults
 from calibration.colorimetry import reflectance_to_srgb, reflectance_to_xyz
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID
+from core.errors import RigError
 
 
 @pytest.mark.filterwarnings("ignore::colour.utilities.ColourRuntimeWarning")

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from calibration import defaults
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID, SpectralGrid
+from core.errors import RigError
 
 
 @pytest.mark.parametrize("name", defaults.camera_names())

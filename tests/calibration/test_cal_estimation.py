@@ -7,8 +7,8 @@ import pytest
 
 from calibration import defaults
 from calibration.basis import SpectralBasis, default_basis
-from calibration.errors import RigError
 from calibration.estimation import estimate_reflectance, response_matrices
+from core.errors import RigError
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from cal_samples import WAVELENGTHS, led, oceanview_text, spectrawiz_text
 
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID
 from calibration.importers import (
     detect_format,
@@ -17,6 +16,7 @@ from calibration.importers import (
     read_spectrum,
 )
 from calibration.spectra import resample
+from core.errors import RigError
 
 GRID_W = DEFAULT_GRID.wavelengths
 

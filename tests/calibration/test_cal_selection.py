@@ -7,7 +7,6 @@ import pytest
 
 from calibration import defaults
 from calibration.basis import SpectralBasis, default_basis
-from calibration.errors import RigError
 from calibration.estimation import estimate_reflectance
 from calibration.selection import (
     channel_mixtures,
@@ -15,6 +14,7 @@ from calibration.selection import (
     normalised_responses,
     rank_illumination_sets,
 )
+from core.errors import RigError
 
 Setup = tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, SpectralBasis]
 

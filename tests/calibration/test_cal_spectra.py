@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID, SpectralGrid
 from calibration.spectra import resample, second_difference_matrix, validate_spectrum
+from core.errors import RigError
 
 GRID_W = DEFAULT_GRID.wavelengths
 

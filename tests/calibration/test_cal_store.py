@@ -9,9 +9,9 @@ import pytest
 import yaml
 
 from calibration import defaults
-from calibration.errors import RigError
 from calibration.grid import DEFAULT_GRID, SpectralGrid
 from calibration.store import CalibrationStore
+from core.errors import RigError
 
 W = np.arange(380.0, 781.0, 5.0)
 

@@ -10,8 +10,8 @@ import yaml
 from fakes import PROFILE, fake_rig
 from rich.console import Console
 
-from reconstruct.board import BoardSpec, detect_board
-from reconstruct.session import Session
+from core.session import Session
+from reconstruct.poses.board import BoardSpec, detect_board
 from rig.capture import run_capture
 from rig.capture.board_check import board_image
 from rig.capture.frames import read_raw
@@ -72,7 +72,7 @@ def test_capture_warns_when_the_board_is_not_in_view(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("bad", [{"squares": [1, 7]}, {"square_length_m": None}, "A3"])
 def test_bad_board_section_is_refused(bad: object) -> None:
-    from calibration.errors import RigError
+    from core.errors import RigError
 
     board = BoardSpec.fit_paper("A3").to_dict()
     section = {**board, **bad} if isinstance(bad, dict) else bad

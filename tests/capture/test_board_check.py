@@ -11,7 +11,7 @@ import pytest
 import rawpy
 
 from drivers.sim.dng import write_dng
-from reconstruct.board import BoardSpec, board_visibility_report
+from reconstruct.poses.board import BoardSpec, board_visibility_report
 from rig.capture.board_check import BoardLook, board_binnings, board_image, look_for_board
 from rig.capture.frames import RawData, read_raw
 

@@ -11,8 +11,8 @@ import pytest
 from fakes import PROFILE, fake_profile, fake_rig
 from rich.console import Console
 
-from calibration.errors import RigError
-from reconstruct.session import MANIFEST_FILE, Session, read_manifest, verify_frames
+from core.errors import RigError
+from core.session import MANIFEST_FILE, Session, read_manifest, verify_frames
 from rig.capture import CaptureStopped, run_capture
 from rig.profile import parse_profile
 
@@ -128,13 +128,13 @@ def test_reconstruct_flag_runs_the_pipeline_or_says_it_is_missing(
 
     from rig.commands import capture as command
 
-    monkeypatch.setitem(sys.modules, "reconstruct.pipeline", None)  # not installed
-    with pytest.raises(RigError, match="reconstruct.pipeline"):
+    monkeypatch.setitem(sys.modules, "reconstruct.run.pipeline", None)  # not installed
+    with pytest.raises(RigError, match="reconstruct.run.pipeline"):
         command.reconstruct(tmp_path)
     calls: list[Path] = []
-    fake = types.ModuleType("reconstruct.pipeline")
+    fake = types.ModuleType("reconstruct.run.pipeline")
     fake.run_reconstruction = calls.append  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, "reconstruct.pipeline", fake)
+    monkeypatch.setitem(sys.modules, "reconstruct.run.pipeline", fake)
     assert command.reconstruct(tmp_path) == 0
     assert calls == [tmp_path]
 

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 import yaml
 
-from calibration.errors import RigError
 from calibration.store import CalibrationStore
+from core.errors import RigError
 from rig.capture.trust import confirm_session_devices, session_programs
 from rig.cli import main
 from rig.profile import parse_profile

@@ -1,6 +1,6 @@
 """Free projector placements: camera and projector moved alternately. The plan tags every
 frame with its placement, asks for the projector move only when the placement changes, and
-the manifest records ``projector_placement`` for reconstruct.procam."""
+the manifest records ``projector_placement`` for reconstruct.initial_mesh.procam."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import pytest
 from fakes import PROFILE, fake_rig
 from rich.console import Console
 
-from calibration.errors import RigError
-from reconstruct.session import Session
+from core.errors import RigError
+from core.session import Session
 from rig.capture import run_capture
 from rig.plans import MoveProjector, MoveTo, capture_plan, frame_list
 from rig.profile import Profile, ProjectorPlacements, parse_profile

@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 import yaml
 
-from calibration.errors import RigError
+from core.errors import RigError
 from rig.capture.devices import sim_config
 from rig.capture.engine import coverage_hint
 from rig.cli import main

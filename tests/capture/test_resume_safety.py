@@ -12,8 +12,8 @@ from fakes import fake_profile, fake_rig
 from rich.console import Console
 from simrig import PROFILE as SIM_PROFILE
 
-from calibration.errors import RigError
-from reconstruct.session import MANIFEST_FILE, read_manifest, sha256_file, verify_frames
+from core.errors import RigError
+from core.session import MANIFEST_FILE, read_manifest, sha256_file, verify_frames
 from rig.capture import run_capture
 from rig.capture.resume import QUARANTINE_DIR, REASONS_FILE, quarantine
 from rig.cli import main

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from simrig import FRAMES, PROFILE, assert_complete, manifest_lines, rig_capture
 
-from reconstruct.session import Session, read_manifest, verify_frames
+from core.session import Session, read_manifest, verify_frames
 from rig.cli import main
 
 pytest.importorskip("drivers.sim")

@@ -1,5 +1,5 @@
 """`rig capture` with free projector placements on the simulated rig, reconstructed by
-reconstruct.procam with no projector calibration."""
+reconstruct.initial_mesh.procam with no projector calibration."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ import pytest
 import trimesh
 import yaml
 
-from reconstruct.camera import read_colmap_text
-from reconstruct.procam import SUMMARY, procam_initial_mesh, read_light_positions
-from reconstruct.session import Session
+from core.session import Session
+from reconstruct.initial_mesh.procam import SUMMARY, procam_initial_mesh, read_light_positions
+from reconstruct.model.camera import read_colmap_text
 from rig.cli import main
 
 PROFILE = Path(__file__).with_name("sim-projector-small.yaml")

@@ -10,7 +10,7 @@ import pytest
 import yaml
 from simrig import PROFILE, assert_complete
 
-from reconstruct.session import Session, read_manifest
+from core.session import Session, read_manifest
 from rig.cli import main
 
 pytest.importorskip("drivers.sim")
@@ -130,13 +130,13 @@ def test_known_poses_are_written_for_the_sim(tmp_path: Path) -> None:
     out = tmp_path / "s"
     args = ["capture", "--profile", str(profile), "--out", str(out), "--yes", "--note", "test"]
     assert main(args) == 0
-    from reconstruct.camera import read_colmap_text
+    from reconstruct.model.camera import read_colmap_text
 
     cameras, images = read_colmap_text(out / "poses")
     assert len(images) == 2 and cameras[1].width == 64
     info = Session.open(out).info
     assert info["notes"] == "test"
-    from reconstruct.poses import metric_scale
+    from reconstruct.poses.stage import metric_scale
 
     centres = {v: np.zeros(3) + v for v in (0, 1)}  # reconstructed 1.732 apart
     assert metric_scale(info, centres) == pytest.approx(2.0 / np.sqrt(3))

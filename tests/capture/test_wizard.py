@@ -11,7 +11,7 @@ import yaml
 
 from calibration import defaults
 from calibration.store import CalibrationStore
-from reconstruct.session import Session
+from core.session import Session
 from rig.capture import run_capture
 from rig.cli import main
 

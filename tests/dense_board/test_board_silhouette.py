@@ -12,17 +12,24 @@ import pytest
 import trimesh
 import yaml
 
-from calibration.errors import RigError
+from core.errors import RigError
+from core.session import FrameRecord, append_manifest, sha256_file
 from drivers.sim.rig import SimRig
-from reconstruct import decode, initial_mesh, poses, render
-from reconstruct.board import BoardSpec, board_texture
-from reconstruct.camera import Intrinsics, Pose, write_colmap_text
-from reconstruct.decode import DecodeIndex, load_frame
-from reconstruct.dense.board_silhouette import board_silhouette, expected_ground, fit_shading
-from reconstruct.dense.poisson import read_mesh
-from reconstruct.dense.silhouette import silhouette
-from reconstruct.raycast import RayCaster
-from reconstruct.session import FrameRecord, append_manifest, sha256_file
+from reconstruct.frames import decode
+from reconstruct.frames.decode import DecodeIndex, load_frame
+from reconstruct.initial_mesh import stage as initial_mesh
+from reconstruct.initial_mesh.dense.board_silhouette import (
+    board_silhouette,
+    expected_ground,
+    fit_shading,
+)
+from reconstruct.initial_mesh.dense.poisson import read_mesh
+from reconstruct.initial_mesh.dense.silhouette import silhouette
+from reconstruct.model import render
+from reconstruct.model.camera import Intrinsics, Pose, write_colmap_text
+from reconstruct.model.raycast import RayCaster
+from reconstruct.poses import stage as poses
+from reconstruct.poses.board import BoardSpec, board_texture
 
 SPEC = BoardSpec.fit_paper("A3")  # 10x7 squares of 39 mm, as profiles/sim.yaml
 PAPER, INK = 0.85, 0.04

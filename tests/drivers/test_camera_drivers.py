@@ -12,7 +12,7 @@ from types import SimpleNamespace
 import pytest
 from PIL import Image
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.cameras.exif import read_exif
 from drivers.cameras.files import copy_durably, write_durably
 from drivers.cameras.folder_watch import FolderWatchCamera, frame_from_files

@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.lights.enttec import EnttecDmxPro
 from drivers.lights.k8062 import VellemanK8062, frame_reports
 from drivers.lights.udmx import UDmx

@@ -58,7 +58,7 @@ def in_vcamera(folder: Path, body: str, out: Path) -> dict:
         """
         import json, sys
         from pathlib import Path
-        from calibration.errors import RigError
+        from core.errors import RigError
         from drivers.registry import open_camera
         out = Path(sys.argv[1])
         result = {}

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.lights.enttec import EnttecDmxPro
 from drivers.lights.manual import ManualLight
 from drivers.lights.rgbcw_emulator import serve_pty

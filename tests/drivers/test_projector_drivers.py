@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.projectors.patterns import (
     bit_count,
     decode_gray_code,

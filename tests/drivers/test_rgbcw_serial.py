@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.lights.rgbcw_emulator import PWM_MAX, RgbcwEmulator, serve_pty
 from drivers.lights.rgbcw_serial import RgbcwSerialLight
 from drivers.testing import ScriptedTransport

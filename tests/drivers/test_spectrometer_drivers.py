@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.protocols import Spectrometer
 from drivers.spectrometers.file_import import FileImportSpectrometer
 from drivers.spectrometers.seabreeze_spectrometer import SeabreezeSpectrometer

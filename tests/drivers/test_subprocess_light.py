@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.registry import open_light
 from drivers.testing import ScriptedTransport
 

@@ -13,7 +13,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from calibration.errors import MissingDependencyError, RigError
+from core.errors import MissingDependencyError, RigError
 from drivers.testing import RecordingTransport, ScriptedTransport, ScriptMismatch
 from drivers.transports import open_transport, redact
 from drivers.transports.base import NotAnsweringError

@@ -8,7 +8,7 @@ import threading
 
 import pytest
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.lights.magichome import MagicHomeLight
 from drivers.lights.tuya import TuyaBulb
 from drivers.testing import ScriptedTransport

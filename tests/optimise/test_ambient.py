@@ -8,9 +8,9 @@ import logging
 import numpy as np
 import pytest
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.sim import SimRig
-from reconstruct.ambient import exposure_ratio, subtract_ambient
+from reconstruct.frames.ambient import exposure_ratio, subtract_ambient
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.problem import Frames
 from reconstruct.optimise.steps import OptimiseSettings, build_problem
@@ -71,7 +71,7 @@ def test_moved_ambient_frame_falls_back_with_a_warning(pair, caplog):
     lit = room.frames.images[0]
     moved = np.roll(room.ambient_images[0], (7, -5), axis=(0, 1))
     aligned = subtract_ambient(lit, _ones(lit), room.ambient_images[0], _ones(lit), 1.0, "v")
-    with caplog.at_level(logging.WARNING, logger="reconstruct.ambient"):
+    with caplog.at_level(logging.WARNING, logger="reconstruct.frames.ambient"):
         out = subtract_ambient(lit, _ones(lit), moved, _ones(lit), 1.0, "view 0 LED1")
     assert not out.aligned and out.shift_px == pytest.approx(np.hypot(7, 5), abs=1.0)
     assert "view 0 LED1" in caplog.text and "px off" in caplog.text
@@ -122,7 +122,7 @@ def test_sim_room_light_config_errors_name_the_key():
 
 
 def _decoded(folder, view: int, label: str, image: np.ndarray, exposure_s: float):
-    from reconstruct.decode import DecodedFrame
+    from reconstruct.frames.decode import DecodedFrame
 
     stem = f"v{view}_{label}"
     np.save(folder / f"{stem}.npy", image.astype(np.float32))
@@ -136,7 +136,7 @@ def _decoded(folder, view: int, label: str, image: np.ndarray, exposure_s: float
 def test_pipeline_subtracts_the_views_ambient_frame(tmp_path, pair):
     from types import SimpleNamespace
 
-    from reconstruct.pipeline import lit_frame
+    from reconstruct.run.pipeline import lit_frame
 
     dark, room = pair
     assert room.ambient_images is not None and room.frames.images is not None

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from calibration.errors import RigError
-from reconstruct.evaluate import surface_distance
+from core.errors import RigError
 from reconstruct.optimise.problem import Frames
 from reconstruct.optimise.sampling import bilinear, blur_frames
 from reconstruct.optimise.steps import OptimiseSettings, coarse_blurs, optimise
 from reconstruct.optimise.synthetic import make_scene, perturb
+from reconstruct.outputs.evaluate import surface_distance
 
 
 def test_blur_reaches_sigma_and_keeps_saturation_out() -> None:

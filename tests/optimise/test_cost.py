@@ -8,7 +8,7 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-from reconstruct.forward import render_values, response_matrix, shading
+from reconstruct.model.forward import render_values, response_matrix, shading
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.solver import ArrowheadPreconditioner

@@ -9,9 +9,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from reconstruct.camera import Pose
+from reconstruct.model.camera import Pose
 from reconstruct.optimise.synthetic import SyntheticScene
-from reconstruct.pipeline import MIN_DISTANCE_RATIO, camera_distances, warn_if_light_distance_weak
+from reconstruct.run.pipeline import (
+    MIN_DISTANCE_RATIO,
+    camera_distances,
+    warn_if_light_distance_weak,
+)
 
 
 def test_one_ring_is_flagged_and_stepping_in_and_out_is_not(

@@ -8,11 +8,11 @@ from typing import Any, cast
 import numpy as np
 import pytest
 
-from calibration.errors import RigError
-from reconstruct.front import FrontResult
+from core.errors import RigError
 from reconstruct.optimise.steps import OptimiseSettings, optimise
 from reconstruct.optimise.synthetic import SyntheticScene
-from reconstruct.pipeline import FRONT_SECTIONS, projector_lights
+from reconstruct.run.front import FrontResult
+from reconstruct.run.pipeline import FRONT_SECTIONS, projector_lights
 
 FAST: dict[str, Any] = {"outer_iterations": 1, "light_iterations": 3, "joint_iterations": 3}
 

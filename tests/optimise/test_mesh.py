@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+from reconstruct.model.render import vertex_normals as render_normals
 from reconstruct.optimise.mesh import (
     NormalJacobian,
     adjacency,
@@ -12,7 +13,6 @@ from reconstruct.optimise.mesh import (
     normal_jacobian,
     vertex_normals,
 )
-from reconstruct.render import vertex_normals as render_normals
 
 
 def test_normals_match_renderer_and_point_outward() -> None:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from calibration.errors import RigError
+from core.errors import RigError
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.multilevel import CoarseOperator, patch_bumps

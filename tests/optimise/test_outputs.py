@@ -10,14 +10,14 @@ import pytest
 import trimesh
 import yaml
 
-from calibration.errors import RigError
-from reconstruct import export
-from reconstruct.evaluate import evaluate, surface_distance
+from core.errors import RigError
 from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.steps import OptimiseResult, OptimiseSettings
 from reconstruct.optimise.synthetic import SyntheticScene
-from reconstruct.pipeline import export_result
-from reconstruct.relight import Camera, encode_srgb, relight
+from reconstruct.outputs import export
+from reconstruct.outputs.evaluate import evaluate, surface_distance
+from reconstruct.outputs.relight import Camera, encode_srgb, relight
+from reconstruct.run.pipeline import export_result
 from rig.cli import main
 
 
@@ -111,7 +111,7 @@ def test_evaluation_of_the_truth_and_of_a_shifted_mesh(
 
 def test_relight_white_is_neutral_under_d65_and_warm_under_a(scene: SyntheticScene) -> None:
     pose = scene.rig.poses[0]
-    from reconstruct.camera import Intrinsics
+    from reconstruct.model.camera import Intrinsics
 
     cam = Camera(Intrinsics.pinhole(60, 45, 90.0), pose)
     white = np.ones_like(scene.reflectance)
@@ -203,7 +203,7 @@ def test_demo_profile_is_a_valid_sim_profile() -> None:
 
 
 def test_config_errors_name_the_file_and_section(tmp_path: Path) -> None:
-    from reconstruct.pipeline import _scaled, load_config
+    from reconstruct.run.pipeline import _scaled, load_config
 
     bad = tmp_path / "recon.yaml"
     bad.write_text("optimize: {gamma: [1, 2, 3]}\n")
@@ -212,7 +212,7 @@ def test_config_errors_name_the_file_and_section(tmp_path: Path) -> None:
     good = tmp_path / "ok.yaml"
     good.write_text("subdivide: {max_faces: 1000}\noptimise: {robust: huber}\n")
     assert load_config(good)["optimise"]["robust"] == "huber"
-    from reconstruct.camera import Intrinsics
+    from reconstruct.model.camera import Intrinsics
 
     half = _scaled(Intrinsics.pinhole(640, 480, 800.0), 320, 240)
     assert half.params == (400.0, 400.0, 160.0, 120.0)

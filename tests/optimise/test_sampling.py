@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import map_coordinates
 
-from reconstruct.camera import Intrinsics, Pose
+from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.optimise.sampling import (
     bilinear,
     bilinear_taps,

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from reconstruct.evaluate import surface_distance
 from reconstruct.optimise.mesh import adjacency, edges
 from reconstruct.optimise.steps import OptimiseSettings, optimise
 from reconstruct.optimise.synthetic import SyntheticScene, perturb
 from reconstruct.optimise.weights import edge_scale, photometric_weights
+from reconstruct.outputs.evaluate import surface_distance
 
 
 def test_joint_optimisation_refines_shape_and_finds_the_light(image_scene: SyntheticScene) -> None:

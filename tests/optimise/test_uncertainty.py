@@ -10,7 +10,6 @@ from scipy.stats import spearmanr
 
 from calibration.basis import default_basis, pca_basis
 from calibration.defaults import training_reflectances
-from reconstruct import export
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.steps import OptimiseSettings, build_problem, optimise
 from reconstruct.optimise.synthetic import SyntheticScene, make_scene
@@ -21,7 +20,8 @@ from reconstruct.optimise.uncertainty import (
     reflectance_prior,
     vertex_uncertainty,
 )
-from reconstruct.pipeline import export_result
+from reconstruct.outputs import export
+from reconstruct.run.pipeline import export_result
 
 
 def _at_truth(scene: SyntheticScene) -> VertexUncertainty:

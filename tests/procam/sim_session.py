@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from core.session import FrameRecord, append_manifest, sha256_file
 from drivers.projectors.patterns import gray_code_sequence
 from drivers.sim import SimRig
-from reconstruct.camera import Intrinsics, Pose
-from reconstruct.session import FrameRecord, append_manifest, sha256_file
+from reconstruct.model.camera import Intrinsics, Pose
 
 PROJECTOR = {"width": 128, "height": 96, "focal_px": 220.0}
 CAMERA = {"width": 240, "height": 180, "focal_px": 500.0, "supersample": 1,

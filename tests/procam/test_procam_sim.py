@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from calibration.errors import RigError
-from reconstruct import decode
-from reconstruct.camera import read_colmap_text
-from reconstruct.procam import (
+from core.errors import RigError
+from core.session import FrameRecord, Session, append_manifest
+from reconstruct.frames import decode
+from reconstruct.initial_mesh.procam import (
     LIGHTS,
     SUMMARY,
     ProcamConfig,
@@ -20,8 +20,8 @@ from reconstruct.procam import (
     procam_initial_mesh,
     read_light_positions,
 )
-from reconstruct.session import FrameRecord, Session, append_manifest
-from reconstruct.stages import STAMP
+from reconstruct.model.camera import read_colmap_text
+from reconstruct.run.stages import STAMP
 from tests.procam import sim_session
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.errors import RigError
-from reconstruct.structured_light import (
+from core.errors import RigError
+from reconstruct.initial_mesh.structured_light import (
     DecodeOptions,
     decode_gray_arrays,
     gray_to_binary,

@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reconstruct.camera import Intrinsics, Pose, project
-from reconstruct.procam import (
+from reconstruct.initial_mesh.procam import (
     Observer,
     check_points,
     light_positions,
@@ -15,6 +14,7 @@ from reconstruct.procam import (
     resect,
     triangulate,
 )
+from reconstruct.model.camera import Intrinsics, Pose, project
 
 RADIUS = 0.07
 
@@ -102,8 +102,8 @@ def test_normals_face_the_cameras() -> None:
 
 
 def test_block_centroids_merge_finer_codes() -> None:
-    from reconstruct.procam import block_centroids
-    from reconstruct.structured_light import GrayDecoding
+    from reconstruct.initial_mesh.procam import block_centroids
+    from reconstruct.initial_mesh.structured_light import GrayDecoding
 
     col = np.array([[0, 1, 2, 3], [0, 1, 2, 3]])
     row = np.array([[0, 0, 1, 1], [1, 1, 0, 0]])

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from recon_tiny import make_session, reconstruct_args
 
-from reconstruct import export
-from reconstruct.memory import peak_rss_mb, reset_peak_rss
+from reconstruct.outputs import export
+from reconstruct.run.memory import peak_rss_mb, reset_peak_rss
 from rig.cli import main
 
 

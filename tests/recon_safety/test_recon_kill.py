@@ -17,9 +17,10 @@ import numpy as np
 import pytest
 from recon_tiny import make_session, reconstruct_args, spawn
 
-from reconstruct import export, publish
 from reconstruct.optimise.checkpoint import FILE as CHECKPOINT
-from reconstruct.run_status import read_status
+from reconstruct.outputs import export
+from reconstruct.run import publish
+from reconstruct.run.status import read_status
 from rig.cli import main
 
 pytest.importorskip("drivers.sim")

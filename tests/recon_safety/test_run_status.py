@@ -12,10 +12,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-from calibration.errors import RigError
-from calibration.yamlio import load_yaml, read_yaml
-from reconstruct import publish
-from reconstruct.run_status import FILE, RunStatus, describe, read_status, tracked
+from core.errors import RigError
+from core.yamlio import load_yaml, read_yaml
+from reconstruct.run import publish
+from reconstruct.run.status import FILE, RunStatus, describe, read_status, tracked
 
 
 def status_of(recon: Path, pid: int) -> None:

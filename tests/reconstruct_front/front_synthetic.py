@@ -10,9 +10,9 @@ import numpy as np
 import trimesh
 import yaml
 
-from reconstruct.camera import Intrinsics, Pose, write_colmap_text
-from reconstruct.raycast import RayCaster
-from reconstruct.session import FrameRecord, append_manifest, sha256_file
+from core.session import FrameRecord, append_manifest, sha256_file
+from reconstruct.model.camera import Intrinsics, Pose, write_colmap_text
+from reconstruct.model.raycast import RayCaster
 
 RADIUS = 0.1
 EXPOSURE_S, ISO = 0.02, 200.0

@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 import yaml
 
+from core.session import FrameRecord, append_manifest, sha256_file
 from drivers.sim.rig import SimRig
-from reconstruct import decode, poses
-from reconstruct.board import BoardSpec, board_texture
-from reconstruct.camera import read_colmap_text
-from reconstruct.session import FrameRecord, append_manifest, sha256_file
+from reconstruct.frames import decode
+from reconstruct.model.camera import read_colmap_text
+from reconstruct.poses import stage as poses
+from reconstruct.poses.board import BoardSpec, board_texture
 
 SPEC = BoardSpec.fit_paper("A3")  # 10x7 squares of 39 mm, as profiles/sim.yaml
 

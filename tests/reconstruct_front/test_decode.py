@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 import rawpy
 
-from calibration.errors import RigError
-from reconstruct import decode
-from reconstruct.decode import DecodeConfig, DecodeIndex, decode_raw, load_frame
-from reconstruct.session import FrameRecord, append_manifest, sha256_file
+from core.errors import RigError
+from core.session import FrameRecord, append_manifest, sha256_file
+from reconstruct.frames import decode
+from reconstruct.frames.decode import DecodeConfig, DecodeIndex, decode_raw, load_frame
 
 BLACK, WHITE = 2056, 15000
 

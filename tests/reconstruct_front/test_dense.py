@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from reconstruct.camera import Intrinsics, Pose
-from reconstruct.dense.poisson import largest_component, poisson_mesh
-from reconstruct.dense.silhouette import fill_holes, silhouette
-from reconstruct.dense.stereo import thin
-from reconstruct.dense.visual_hull import carve, scene_box
+from reconstruct.initial_mesh.dense.poisson import largest_component, poisson_mesh
+from reconstruct.initial_mesh.dense.silhouette import fill_holes, silhouette
+from reconstruct.initial_mesh.dense.stereo import thin
+from reconstruct.initial_mesh.dense.visual_hull import carve, scene_box
+from reconstruct.model.camera import Intrinsics, Pose
 
 
 def test_silhouette_keeps_dark_limb_and_fills_holes() -> None:
@@ -67,7 +67,7 @@ def test_poisson_keeps_the_largest_piece() -> None:
 def test_poisson_refuses_an_empty_cloud() -> None:
     import pytest
 
-    from calibration.errors import RigError
+    from core.errors import RigError
 
     with pytest.raises(RigError, match="given 0 points"):
         poisson_mesh(np.zeros((0, 3)), np.zeros((0, 3)), 6, 5.0)
@@ -95,7 +95,7 @@ def test_scene_box_without_points_spans_the_widest_view() -> None:
 
 
 def test_poisson_flares_outside_the_hull_are_pulled_onto_it() -> None:
-    from reconstruct.initial_mesh import clip_to_hull
+    from reconstruct.initial_mesh.stage import clip_to_hull
 
     intr = Intrinsics.pinhole(120, 90, 150.0)
     eyes = [(0.5, 0, 0.1), (-0.5, 0, 0.1), (0, 0.5, 0.1), (0, -0.5, 0.1), (0.1, 0.1, 0.5)]

@@ -12,9 +12,9 @@ import pytest
 import trimesh
 from front_synthetic import RADIUS, build_session, dented_sphere
 
-from calibration.errors import RigError
-from reconstruct.dense.poisson import read_mesh
-from reconstruct.front import FrontConfig, run_front
+from core.errors import RigError
+from reconstruct.initial_mesh.dense.poisson import read_mesh
+from reconstruct.run.front import FrontConfig, run_front
 
 FAST = {"mesh": {"voxels": 64}}
 
@@ -72,7 +72,7 @@ def test_config_errors(tmp_path: Path) -> None:
     with pytest.raises(RigError, match="mask_dilate_px"):
         FrontConfig.from_mapping({"mesh": {"mask_dilate_px": -1}})
     with pytest.raises(RigError, match="initial mesh"):
-        from reconstruct.initial_mesh import load_user_mesh
+        from reconstruct.initial_mesh.stage import load_user_mesh
 
         load_user_mesh(tmp_path / "nope.ply")
 

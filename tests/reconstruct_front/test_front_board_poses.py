@@ -20,10 +20,11 @@ from board_synthetic import (
     true_poses,
 )
 
-from calibration.errors import RigError
-from reconstruct import decode, poses
-from reconstruct.camera import Pose, write_colmap_text
-from reconstruct.poses import SfmResult
+from core.errors import RigError
+from reconstruct.frames import decode
+from reconstruct.model.camera import Pose, write_colmap_text
+from reconstruct.poses import stage as poses
+from reconstruct.poses.stage import SfmResult
 
 TRUTH = true_poses()
 
@@ -231,9 +232,9 @@ def test_board_found_in_full_resolution_frames_when_sfm_copies_are_small(
 def test_board_frame_poses_send_the_board_to_the_mesh_stage(session_copy: Path) -> None:
     """The silhouettes of a board session are cut against the board's print (no dark
     background), which the initial-mesh stage needs the board for."""
-    from reconstruct.front import _mesh_config
-    from reconstruct.initial_mesh import MeshConfig
-    from reconstruct.session import Session
+    from core.session import Session
+    from reconstruct.initial_mesh.stage import MeshConfig
+    from reconstruct.run.front import _mesh_config
 
     _poses(session_copy, {"board_with_sfm": False})
     session = Session.open(session_copy)

@@ -7,8 +7,7 @@ import pytest
 import trimesh
 from scipy.ndimage import map_coordinates
 
-from reconstruct.camera import Intrinsics, Pose
-from reconstruct.dense.patchmatch import (
+from reconstruct.initial_mesh.dense.patchmatch import (
     PatchMatchConfig,
     ViewDepth,
     fuse,
@@ -19,8 +18,9 @@ from reconstruct.dense.patchmatch import (
     undistorted,
     window_offsets,
 )
-from reconstruct.dense.plane_cost import texture_map
-from reconstruct.raycast import RayCaster
+from reconstruct.initial_mesh.dense.plane_cost import texture_map
+from reconstruct.model.camera import Intrinsics, Pose
+from reconstruct.model.raycast import RayCaster
 
 WIDTH, HEIGHT, FOCAL = 200, 150, 400.0
 

@@ -11,10 +11,12 @@ import cv2
 import numpy as np
 import pytest
 
-from calibration.errors import RigError
-from reconstruct import decode, poses
-from reconstruct.camera import Intrinsics, Pose, read_colmap_text, write_colmap_text
-from reconstruct.poses import (
+from core.errors import RigError
+from core.session import Session
+from reconstruct.frames import decode
+from reconstruct.model.camera import Intrinsics, Pose, read_colmap_text, write_colmap_text
+from reconstruct.poses import stage as poses
+from reconstruct.poses.stage import (
     PosesConfig,
     metric_scale,
     rescale,
@@ -22,7 +24,6 @@ from reconstruct.poses import (
     session_intrinsics,
     view_of_name,
 )
-from reconstruct.session import Session
 
 
 def _run(root: Path) -> Path:

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from calibration.errors import RigError
-from reconstruct.camera import write_colmap_text
-from reconstruct.dense.poisson import read_mesh
-from reconstruct.front import FrontConfig, run_front
-from reconstruct.procam import ProcamConfig
-from reconstruct.structured_light import is_structured
+from core.errors import RigError
+from reconstruct.initial_mesh.dense.poisson import read_mesh
+from reconstruct.initial_mesh.procam import ProcamConfig
+from reconstruct.initial_mesh.structured_light import is_structured
+from reconstruct.model.camera import write_colmap_text
+from reconstruct.run.front import FrontConfig, run_front
 from tests.procam import sim_session
 
 

@@ -13,11 +13,11 @@ import pytest
 import trimesh
 import yaml
 
+from core.session import FrameRecord, append_manifest, sha256_file
 from drivers.sim.rig import SimRig
-from reconstruct.camera import read_colmap_text
-from reconstruct.dense.poisson import read_mesh
-from reconstruct.front import run_front
-from reconstruct.session import FrameRecord, append_manifest, sha256_file
+from reconstruct.initial_mesh.dense.poisson import read_mesh
+from reconstruct.model.camera import read_colmap_text
+from reconstruct.run.front import run_front
 
 ILLUMINATIONS = ("LED2", "LED3")
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from calibration.errors import RigError
-from reconstruct.subdivide import (
+from core.errors import RigError
+from reconstruct.geometry.subdivide import (
     beta,
     decimate,
     mean_edge,

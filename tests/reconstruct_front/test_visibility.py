@@ -7,14 +7,14 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from reconstruct.camera import Intrinsics, Pose
-from reconstruct.raycast import RayCaster
-from reconstruct.visibility import (
+from reconstruct.geometry.visibility import (
     Visibility,
     compute_visibility,
     pair_shadow_mask,
     shadow_mask,
 )
+from reconstruct.model.camera import Intrinsics, Pose
+from reconstruct.model.raycast import RayCaster
 
 
 def _scene() -> tuple[trimesh.Trimesh, int]:

@@ -10,12 +10,12 @@ import pytest
 import rawpy
 
 from calibration.defaults import colorchecker_reflectances
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.sim.camera import SensorConfig, SimCamera
 from drivers.sim.light import SimLight
 from drivers.sim.scene import Scene, make_scene
-from reconstruct import forward
-from reconstruct.camera import Pose
+from reconstruct.model import forward
+from reconstruct.model.camera import Pose
 
 from .test_dng import decode
 

@@ -9,9 +9,9 @@ import pytest
 import rawpy
 import tifffile
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.sim.dng import write_dng
-from reconstruct.decode import postprocess_linear
+from reconstruct.frames.decode import postprocess_linear
 
 BLACK, WHITE = 512, 16383
 

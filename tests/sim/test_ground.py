@@ -6,11 +6,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.errors import RigError
+from core.errors import RigError
 from drivers.sim import SimRig
-from reconstruct.board import BoardSpec, board_poses, board_texture, detect_board, linear_to_u8
-from reconstruct.camera import Pose, project
-from reconstruct.render import GroundPlane
+from reconstruct.model.camera import Pose, project
+from reconstruct.model.render import GroundPlane
+from reconstruct.poses.board import (
+    BoardSpec,
+    board_poses,
+    board_texture,
+    detect_board,
+    linear_to_u8,
+)
 
 BOARD = BoardSpec.fit_paper("A3")  # 10x7 squares of 39 mm, as profiles/sim.yaml
 
@@ -121,7 +127,7 @@ def test_bad_ground_config_is_refused() -> None:
 
 
 def test_shadow_rays_are_skipped_only_where_nothing_can_block() -> None:
-    from reconstruct.render import _segment_meets_box
+    from reconstruct.model.render import _segment_meets_box
 
     rng = np.random.default_rng(0)
     lo, hi = np.array([-1.0, -1.0, -1.0]), np.array([1.0, 1.0, 1.0])

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import yaml
 
-from calibration.errors import RigError
 from calibration.spectra import resample
+from core.errors import RigError
 from drivers.protocols import Camera, LightSource, Projector, Spectrometer
 from drivers.sim import Scene, SimRig, make_scene
-from reconstruct.camera import project, read_colmap_text
+from reconstruct.model.camera import project, read_colmap_text
 
 SMALL = {
     "scene": "blob",

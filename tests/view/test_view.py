@@ -14,7 +14,7 @@ import trimesh
 
 from calibration.colorimetry import reflectance_to_srgb
 from calibration.grid import DEFAULT_GRID
-from reconstruct.export import write_reflectance_npz
+from reconstruct.outputs.export import write_reflectance_npz
 from rig.cli import main
 from rig.view.colour import illuminant_matrices
 from rig.view.serve import make_server

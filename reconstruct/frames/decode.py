@@ -1,0 +1,303 @@
+"""Decode stage: RAW (or linear TIFF/NPY) frames -> linear camera RGB + saturation masks.
+
+Values follow DESIGN.md: ``y = (raw - black) / (white - black) / (exposure_s * iso / 100)``,
+demosaiced in camera RGB with no white balance, colour matrix or gamma. LibRaw is told not to
+stretch the histogram (``no_auto_bright``, ``adjust_maximum_thr=0``), otherwise the gain would
+change from shot to shot. Its 16-bit output is then exactly ``65535 (raw - black) / (white -
+black)``. A pixel is saturated when any mosaic sample in its demosaic neighbourhood is at or
+near the white level; such pixels are never used.
+
+Outputs in ``recon/decoded/``: ``<frame>.npy`` (H x W x 3, float16, or float32 beyond its
+range), ``<frame>_sat.npy`` (bool mask), ``index.json`` (frame -> view, illumination, files,
+skipped frames and why), and 8-bit tone-mapped copies of one frame per view in ``sfm/`` for
+structure from motion.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import rawpy
+import tifffile
+from rich.progress import track
+from scipy.ndimage import maximum_filter
+
+from core.errors import RigError
+from core.session import FrameRecord, Session, verify_frames, write_bytes_atomically
+from reconstruct.run.stages import run_stage
+
+log = logging.getLogger("reconstruct.frames.decode")
+
+INDEX = "index.json"
+SFM_DIR = "sfm"
+FLOAT16_RANGE = 6e4  # largest value a frame may hold to be kept as float16 (max 65504)
+DEMOSAIC = {
+    "linear": rawpy.DemosaicAlgorithm.LINEAR,
+    "vng": rawpy.DemosaicAlgorithm.VNG,
+    "ppg": rawpy.DemosaicAlgorithm.PPG,
+    "ahd": rawpy.DemosaicAlgorithm.AHD,
+    "dcb": rawpy.DemosaicAlgorithm.DCB,
+    "dht": rawpy.DemosaicAlgorithm.DHT,
+    "aahd": rawpy.DemosaicAlgorithm.AAHD,
+}
+LINEAR_SUFFIXES = {".npy", ".tif", ".tiff"}
+
+
+@dataclass(frozen=True)
+class DecodeConfig:
+    """``demosaic``: LibRaw algorithm; ``saturation``: fraction of (white - black) above which
+    a mosaic sample counts as clipped; ``on_bad_frame``: ``skip`` or ``stop``;
+    ``sfm_illumination``: which illumination's frame of each view goes to SfM (None: the
+    brightest)."""
+
+    demosaic: str = "ahd"
+    saturation: float = 0.98
+    on_bad_frame: str = "skip"
+    sfm_illumination: str | None = None
+    sfm_max_side: int = 0  # 0: keep the full size
+
+    def __post_init__(self) -> None:
+        if self.demosaic not in DEMOSAIC:
+            raise RigError(
+                f"decode.demosaic {self.demosaic!r} is unknown", f"use one of {', '.join(DEMOSAIC)}"
+            )
+        if self.on_bad_frame not in ("skip", "stop"):
+            raise RigError(
+                f"decode.on_bad_frame {self.on_bad_frame!r} is unknown", "use skip or stop"
+            )
+
+
+@dataclass
+class DecodedFrame:
+    """One decoded frame as listed in ``index.json`` (paths relative to ``recon/decoded``)."""
+
+    frame: int
+    view: int
+    illumination: str
+    image: str
+    saturated: str
+    source: str
+    exposure_s: float
+    iso: float
+    height: int
+    width: int
+    saturated_fraction: float
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class DecodeIndex:
+    frames: list[DecodedFrame]
+    skipped: dict[str, str]  # source path -> reason
+    sfm_images: dict[int, str]  # view -> file name in sfm/
+
+    @classmethod
+    def load(cls, out_dir: Path) -> DecodeIndex:
+        data = json.loads((out_dir / INDEX).read_text())
+        return cls(
+            [DecodedFrame(**f) for f in data["frames"]],
+            data["skipped"],
+            {int(k): v for k, v in data["sfm_images"].items()},
+        )
+
+    def save(self, out_dir: Path) -> None:
+        data = {
+            "frames": [asdict(f) for f in self.frames],
+            "skipped": self.skipped,
+            "sfm_images": {str(k): v for k, v in self.sfm_images.items()},
+        }
+        write_bytes_atomically(out_dir / INDEX, json.dumps(data, indent=1).encode())
+
+
+def load_frame(out_dir: Path, frame: DecodedFrame) -> tuple[np.ndarray, np.ndarray]:
+    """Linear float32 image (H, W, 3) and saturation mask (H, W) of a decoded frame."""
+    image = np.load(out_dir / frame.image).astype(np.float32)
+    return image, np.load(out_dir / frame.saturated)
+
+
+def postprocess_linear(raw: rawpy.RawPy, demosaic: str) -> np.ndarray:
+    """LibRaw's demosaic with nothing else: black subtracted, scaled so white = 65535, no white
+    balance, no colour matrix, gamma 1, and a fixed maximum (``adjust_maximum_thr=0``) so the
+    gain never changes from shot to shot."""
+    return raw.postprocess(
+        demosaic_algorithm=DEMOSAIC[demosaic],
+        use_camera_wb=False,
+        use_auto_wb=False,
+        user_wb=[1.0, 1.0, 1.0, 1.0],
+        output_color=rawpy.ColorSpace.raw,
+        gamma=(1, 1),
+        output_bps=16,
+        no_auto_bright=True,
+        adjust_maximum_thr=0.0,
+        user_flip=0,
+    )
+
+
+def decode_raw(path: Path, demosaic: str, saturation: float) -> tuple[np.ndarray, np.ndarray]:
+    """RAW file -> ((raw - black) / (white - black) in camera RGB, saturation mask)."""
+    with rawpy.imread(str(path)) as raw:
+        mosaic = raw.raw_image_visible.astype(np.float32)
+        blacks = np.asarray(raw.black_level_per_channel, dtype=np.float32)
+        black = blacks[raw.raw_colors_visible]
+        white = float(raw.white_level)
+        rgb = postprocess_linear(raw, demosaic)
+    clipped = (mosaic - black) >= saturation * (white - black)
+    # the demosaic reads a neighbourhood: a pixel is unusable if any sample near it clipped
+    radius = 1 if demosaic == "linear" else 2
+    mask = maximum_filter(clipped, size=2 * radius + 1)
+    if mask.shape != rgb.shape[:2]:
+        size = (int(rgb.shape[1]), int(rgb.shape[0]))
+        mask = cv2.resize(mask.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
+    return rgb.astype(np.float32) / 65535.0, mask
+
+
+def decode_linear(
+    path: Path, record: FrameRecord, saturation: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Linear TIFF/NPY -> normalised RGB + mask. Integer data uses the manifest's
+    ``black_level``/``white_level`` (default 0 and the dtype's maximum); float data is taken
+    as already normalised, with white level ``white_level`` (default 1)."""
+    data = np.load(path) if path.suffix == ".npy" else tifffile.imread(path)
+    if data.ndim != 3 or data.shape[2] != 3:
+        raise ValueError(f"expected an H x W x 3 array, got shape {data.shape}")
+    if np.issubdtype(data.dtype, np.integer):
+        black = float(record.extra.get("black_level", 0.0))
+        white = float(record.extra.get("white_level", np.iinfo(data.dtype).max))
+    else:
+        black = float(record.extra.get("black_level", 0.0))
+        white = float(record.extra.get("white_level", 1.0))
+    values = data.astype(np.float32)
+    mask = np.any(values - black >= saturation * (white - black), axis=2)
+    return (values - black) / (white - black), mask
+
+
+def _decode_one(
+    session: Session, record: FrameRecord, conf: DecodeConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    path = session.root / record.path
+    if path.suffix.lower() in LINEAR_SUFFIXES:
+        rgb, mask = decode_linear(path, record, conf.saturation)
+    else:
+        rgb, mask = decode_raw(path, conf.demosaic, conf.saturation)
+    if record.exposure_s <= 0 or record.iso <= 0:
+        raise ValueError(f"exposure_s={record.exposure_s} and iso={record.iso} must be positive")
+    rgb /= record.exposure_s * record.iso / 100.0
+    if not np.all(np.isfinite(rgb)):
+        raise ValueError("decoded values are not finite")
+    return rgb, mask
+
+
+def tone_map(images: list[np.ndarray], max_side: int = 0) -> list[np.ndarray]:
+    """Linear images -> 8-bit sRGB-like copies with one common exposure (for SIFT)."""
+    scale = max(float(np.percentile(img, 99.5)) for img in images) or 1.0
+    out = []
+    for img in images:
+        g = np.clip(img / scale, 0.0, 1.0) ** (1.0 / 2.2)
+        u8 = (g * 255.0 + 0.5).astype(np.uint8)
+        if max_side and max(u8.shape[:2]) > max_side:
+            f = max_side / max(u8.shape[:2])
+            u8 = np.asarray(cv2.resize(u8, None, fx=f, fy=f, interpolation=cv2.INTER_AREA))
+        out.append(u8)
+    return out
+
+
+def sfm_image_name(view: int) -> str:
+    return f"view_{view:04d}.png"
+
+
+def list_unusable(bad: Mapping[str, str]) -> str:
+    """``frame: why; …`` for one-line messages (the decode stage's, the reconstruct and batch
+    commands')."""
+    return "; ".join(f"{name}: {why}" for name, why in sorted(bad.items()))
+
+
+def _bad(conf: DecodeConfig, bad: dict[str, str]) -> None:
+    for name, why in bad.items():
+        log.warning(
+            "frame %s is unusable (%s)%s",
+            name,
+            why,
+            ", skipped" if conf.on_bad_frame == "skip" else "",
+        )
+    if bad and conf.on_bad_frame == "stop":
+        raise RigError(
+            f"{len(bad)} frame(s) are unusable: {list_unusable(bad)}",
+            "recapture them, restore them from a backup, or set decode.on_bad_frame: skip",
+        )
+
+
+def _decode(session: Session, conf: DecodeConfig, out_dir: Path) -> None:
+    if not session.frames:
+        raise RigError(f"{session.root} has no frames in its manifest", "capture a session first")
+    problems = verify_frames(session.root, session.frames)
+    bad = {p.record.path: p.problem for p in problems}
+    _bad(conf, bad)
+    frames: list[DecodedFrame] = []
+    best: dict[int, tuple[float, np.ndarray]] = {}  # view -> (score, image) for SfM
+    for record in track(
+        [r for r in session.frames if r.path not in bad], description="decoding frames"
+    ):
+        try:
+            rgb, mask = _decode_one(session, record, conf)
+        except (rawpy.LibRawError, OSError, ValueError) as exc:
+            bad[record.path] = f"cannot be decoded: {exc}"
+            _bad(conf, {record.path: bad[record.path]})
+            continue
+        stem = f"frame_{record.frame:05d}"
+        # float16 halves the cache (3 significant digits, below sensor noise) unless the
+        # exposure normalisation pushes values past its range (65504)
+        small = float(rgb.max()) < FLOAT16_RANGE
+        np.save(out_dir / f"{stem}.npy", rgb.astype(np.float16 if small else np.float32))
+        np.save(out_dir / f"{stem}_sat.npy", mask)
+        frames.append(
+            DecodedFrame(
+                record.frame,
+                record.view,
+                record.illumination,
+                f"{stem}.npy",
+                f"{stem}_sat.npy",
+                record.path,
+                record.exposure_s,
+                record.iso,
+                rgb.shape[0],
+                rgb.shape[1],
+                float(mask.mean()),
+                dict(record.extra),
+            )
+        )
+        score = _sfm_score(record.illumination, rgb, conf)
+        if record.view not in best or score > best[record.view][0]:
+            best[record.view] = (score, rgb)
+    if not frames:
+        raise RigError(f"no frame of {session.root} could be decoded", "see recon/log.txt")
+    (out_dir / SFM_DIR).mkdir(exist_ok=True)
+    views = sorted(best)
+    for view, u8 in zip(
+        views, tone_map([best[v][1] for v in views], conf.sfm_max_side), strict=True
+    ):
+        cv2.imwrite(str(out_dir / SFM_DIR / sfm_image_name(view)), u8[:, :, ::-1])
+    DecodeIndex(frames, bad, {v: sfm_image_name(v) for v in views}).save(out_dir)
+    log.info("decoded %d frames of %d views, %d skipped", len(frames), len(views), len(bad))
+
+
+def _sfm_score(illumination: str, rgb: np.ndarray, conf: DecodeConfig) -> float:
+    """Which frame of a view goes to SfM: the requested illumination, else the brightest."""
+    if conf.sfm_illumination is not None and illumination == conf.sfm_illumination:
+        return float("inf")
+    return float(np.mean(rgb))
+
+
+def run(conf: DecodeConfig | Mapping[str, Any], session_dir: Path, out_dir: Path) -> Path:
+    """Decode every frame of the session into ``out_dir`` (resumable)."""
+    conf = conf if isinstance(conf, DecodeConfig) else DecodeConfig(**conf)
+    session = Session.open(session_dir)
+    inputs = [session_dir / "manifest.jsonl"] + [session_dir / r.path for r in session.frames]
+    run_stage("decode", asdict(conf), inputs, out_dir, lambda: _decode(session, conf, out_dir))
+    return out_dir

@@ -1,0 +1,159 @@
+"""Visibility stage: V(i), the views that see vertex i (paper Sec. 3.2), and shadow masks.
+
+A view sees a vertex when the vertex projects inside its image, faces the camera and the
+segment vertex -> camera centre crosses no triangle (Embree through
+:class:`reconstruct.model.raycast.RayCaster`). Stored as CSR (vertex -> view indices) in
+``visibility.npz``: ``indptr`` (N+1,), ``indices`` (nnz,) of views, ``depth`` (nnz,) the
+vertex's depth in that view, and ``views`` (the view numbers in column order).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+
+from core.session import write_bytes_atomically
+from reconstruct.initial_mesh.dense.poisson import read_mesh
+from reconstruct.model.camera import Intrinsics, Pose, project
+from reconstruct.model.raycast import RayCaster
+from reconstruct.poses import stage as poses_stage
+from reconstruct.run.progress import track
+from reconstruct.run.stages import run_stage
+
+log = logging.getLogger("reconstruct.geometry.visibility")
+
+FILE = "visibility.npz"
+
+
+@dataclass(frozen=True)
+class VisibilityConfig:
+    """``eps``: self-hit tolerance relative to the scene size; ``margin_px``: border of the
+    image treated as outside; ``min_cos``: least cosine between normal and view direction."""
+
+    eps: float = 1e-4
+    margin_px: float = 1.0
+    min_cos: float = 0.0
+
+
+@dataclass
+class Visibility:
+    """CSR vertex -> views. ``views[indices[indptr[i]:indptr[i+1]]]`` are the views of i."""
+
+    indptr: np.ndarray
+    indices: np.ndarray
+    depth: np.ndarray
+    views: np.ndarray
+
+    def of(self, vertex: int) -> np.ndarray:
+        """View numbers that see ``vertex``."""
+        return self.views[self.indices[self.indptr[vertex] : self.indptr[vertex + 1]]]
+
+    def pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        """(vertex, view column) of every visible pair, in CSR order."""
+        counts = np.diff(self.indptr)
+        return np.repeat(np.arange(len(counts)), counts), self.indices
+
+    def counts(self) -> np.ndarray:
+        return np.diff(self.indptr)
+
+    def save(self, path: Path) -> None:
+        np.savez_compressed(path, indptr=self.indptr, indices=self.indices, depth=self.depth,
+                            views=self.views)
+
+    @classmethod
+    def load(cls, path: Path) -> Visibility:
+        with np.load(path) as data:
+            return cls(data["indptr"], data["indices"], data["depth"], data["views"])
+
+
+def compute_visibility(
+    mesh: trimesh.Trimesh,
+    intrinsics: Mapping[int, Intrinsics],
+    poses: Mapping[int, Pose],
+    conf: VisibilityConfig = VisibilityConfig(),
+    caster: RayCaster | None = None,
+) -> Visibility:
+    """V(i) for every vertex, vectorised over vertices for each view."""
+    caster = caster or RayCaster(mesh.vertices, mesh.faces)
+    points = np.asarray(mesh.vertices, dtype=float)
+    normals = np.asarray(mesh.vertex_normals, dtype=float)
+    views = np.array(sorted(poses), dtype=np.int64)
+    rows_l, cols_l, depth_l = [], [], []
+    for col, view in enumerate(track(views.tolist(), "visibility: ray casting")):
+        pose, intr = poses[int(view)], intrinsics[int(view)]
+        uv = project(intr, pose, points)
+        z = pose.to_camera(points)[:, 2]
+        to_cam = pose.center - points
+        cos = np.einsum("ij,ij->i", normals, to_cam) / np.linalg.norm(to_cam, axis=1)
+        cand = np.flatnonzero(intr.in_image(uv, conf.margin_px) & (z > 0) & (cos > conf.min_cos))
+        seen = cand[~caster.occluded(points[cand], pose.center, conf.eps, normals[cand])]
+        rows_l.append(seen)
+        cols_l.append(np.full(len(seen), col))
+        depth_l.append(z[seen])
+    rows, cols, z_all = (np.concatenate(a) for a in (rows_l, cols_l, depth_l))
+    order = np.lexsort((cols, rows))
+    rows, cols, z_all = rows[order], cols[order], z_all[order]
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=len(points)))])
+    return Visibility(indptr, cols.astype(np.int32), z_all, views)
+
+
+def shadow_mask(
+    caster: RayCaster,
+    points: np.ndarray,
+    normals: np.ndarray,
+    lights: np.ndarray,
+    eps: float = 1e-4,
+) -> np.ndarray:
+    """m (N, L): 1 where the segment point -> light is free, for light positions (L, 3)."""
+    lights = np.atleast_2d(lights)
+    out = np.empty((len(points), len(lights)), bool)
+    for k, light in enumerate(lights):
+        out[:, k] = ~caster.occluded(points, light, eps, normals)
+    return out
+
+
+def pair_shadow_mask(
+    caster: RayCaster,
+    points: np.ndarray,
+    normals: np.ndarray,
+    visibility: Visibility,
+    lights: Mapping[int, np.ndarray],
+    eps: float = 1e-4,
+) -> np.ndarray:
+    """Shadow mask for each visible (vertex, view) pair of ``visibility`` (CSR order), with
+    the light of each view at ``lights[view]`` (e.g. ``Pose.light_position(v)``)."""
+    rows, cols = visibility.pairs()
+    targets = np.array([lights[int(v)] for v in visibility.views])[cols]
+    return ~caster.occluded(points[rows], targets, eps, normals[rows])
+
+
+def _visibility(mesh_path: Path, poses_dir: Path, conf: VisibilityConfig, out_dir: Path) -> None:
+    mesh = read_mesh(mesh_path)
+    intrinsics, poses, _ = poses_stage.load(poses_dir)
+    vis = compute_visibility(mesh, intrinsics, poses, conf)
+    vis.save(out_dir / FILE)
+    counts = vis.counts()
+    summary = {"vertices": len(counts), "pairs": int(counts.sum()),
+               "mean_views_per_vertex": float(counts.mean()),
+               "unseen_vertices": int((counts == 0).sum())}
+    write_bytes_atomically(out_dir / "visibility.json", json.dumps(summary, indent=1).encode())
+    log.info("visibility: %.1f views per vertex on average, %d vertices unseen",
+             summary["mean_views_per_vertex"], summary["unseen_vertices"])
+
+
+def run(
+    conf: VisibilityConfig | Mapping[str, Any], mesh_path: Path, poses_dir: Path, out_dir: Path
+) -> Path:
+    """V(i) of ``mesh_path``'s vertices into ``out_dir/visibility.npz`` (resumable)."""
+    conf = conf if isinstance(conf, VisibilityConfig) else VisibilityConfig(**conf)
+    inputs = [mesh_path, poses_dir / "images.txt", poses_dir / "cameras.txt"]
+    run_stage("visibility", asdict(conf), inputs, out_dir,
+              lambda: _visibility(mesh_path, poses_dir, conf, out_dir))
+    return out_dir / FILE

@@ -1,0 +1,1 @@
+"""The CPU dense path: silhouettes, visual hull, plane-sweep and PatchMatch stereo, Poisson."""

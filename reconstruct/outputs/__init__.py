@@ -1,0 +1,1 @@
+"""What a reconstruction hands on: PLY/NPZ/report files, relit renders, evaluation, plots."""

@@ -1,0 +1,127 @@
+"""Relighting: render the reconstruction (shape + spectral reflectance) from a view or a new
+camera under a point light with any illuminant, with cast shadows, as an sRGB PNG.
+
+The image is formed with the one forward model
+(:func:`reconstruct.model.render.render_image`) using,
+instead of a camera's ``C^T diag(L)``, the response ``M_sRGB · x̄ȳz̄ᵀ · diag(L)``: linear sRGB
+(D65 primaries, no white balance, so illuminant A looks warm) of the reflected light. Exposure
+is normalised so a white reflector facing the light at the scene's distance reads ``exposure``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import colour
+import cv2
+import numpy as np
+import yaml
+
+from calibration.colorimetry import xyz_weights
+from calibration.grid import SpectralGrid
+from calibration.importers import read_spectrum
+from calibration.spectra import resample
+from core.errors import RigError
+from core.yamlio import read_yaml
+from reconstruct.model.camera import Intrinsics, Pose, read_colmap_text
+from reconstruct.model.raycast import RayCaster
+from reconstruct.model.render import render_image
+
+_XYZ_TO_SRGB = np.asarray(colour.models.RGB_COLOURSPACE_sRGB.matrix_XYZ_to_RGB, dtype=float)
+
+
+@dataclass(frozen=True)
+class Camera:
+    intrinsics: Intrinsics
+    pose: Pose
+
+
+def illuminant_spd(spec: str, grid: SpectralGrid) -> np.ndarray:
+    """A CIE illuminant by name (D65, A, FL2, LED-B3, …) or an SPD file on ``grid``: a CSV
+    ``wavelength_nm,power`` or any format `rig calibrate import` reads (OceanView, SpectraWiz)."""
+    path = Path(spec)
+    if path.suffix:  # a file name (CIE names have none); a missing file is a clear error
+        spectrum = read_spectrum(path)
+        return resample(
+            spectrum.wavelengths_nm, spectrum.column(None, "light"), grid, source=str(path)
+        )
+    from calibration.defaults import cie_illuminant
+
+    return cie_illuminant(spec, grid)
+
+
+def srgb_response(spd: np.ndarray, grid: SpectralGrid) -> np.ndarray:
+    """(3, N_λ): reflectance -> linear sRGB of the light it reflects under ``spd``
+    (a white reflector gives Y = 1 at unit shading)."""
+    w = xyz_weights(grid, spd)  # (N_λ, 3), white -> Y = 1
+    return _XYZ_TO_SRGB @ w.T
+
+
+def encode_srgb(linear: np.ndarray) -> np.ndarray:
+    """Linear sRGB -> 8-bit gamma-encoded."""
+    v = np.asarray(colour.cctf_encoding(np.clip(linear, 0.0, 1.0), function="sRGB"))
+    return np.clip(np.round(v * 255.0), 0, 255).astype(np.uint8)
+
+
+def write_png(path: Path, rgb8: np.ndarray) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(path), cv2.cvtColor(rgb8, cv2.COLOR_RGB2BGR)):
+        raise RigError(f"cannot write {path}", "check the folder exists and is writable")
+    return path
+
+
+def load_camera_file(path: Path) -> Camera:
+    """A camera from a COLMAP text model folder (its first image) or a YAML file with
+    ``width, height, focal_px, eye, target`` [``up``] (metres, world frame)."""
+    if path.is_dir():
+        cams, images = read_colmap_text(path)
+        if not images:
+            raise RigError(f"{path}/images.txt lists no image", "add the camera's pose")
+        cid, _, pose = images[min(images)]
+        return Camera(cams[cid], pose)
+    try:
+        data = read_yaml(path, "camera file", "fix the YAML syntax")
+        intr = Intrinsics.pinhole(int(data["width"]), int(data["height"]), float(data["focal_px"]))
+        up = tuple(data.get("up", (0.0, 0.0, 1.0)))
+        pose = Pose.look_at(np.asarray(data["eye"], float), np.asarray(data["target"], float), up)
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as error:
+        raise RigError(
+            f"cannot read camera file {path}: {error}",
+            "give a COLMAP text model folder or YAML with width, height, focal_px, eye, target",
+        ) from error
+    return Camera(intr, pose)
+
+
+def relight(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    reflectance: np.ndarray,
+    wavelengths_nm: np.ndarray,
+    camera: Camera,
+    light_position: np.ndarray,
+    illuminant: str | np.ndarray = "D65",
+    exposure: float = 0.8,
+    supersample: int = 2,
+    caster: RayCaster | None = None,
+) -> np.ndarray:
+    """Linear sRGB image (H, W, 3) of the reconstruction under a point light."""
+    grid = SpectralGrid.from_wavelengths(wavelengths_nm)
+    spd = (
+        illuminant_spd(illuminant, grid) if isinstance(illuminant, str) else np.asarray(illuminant)
+    )
+    response = srgb_response(spd, grid)
+    light = np.asarray(light_position, dtype=float)
+    distance = float(np.linalg.norm(light - vertices.mean(axis=0)))
+    image, _ = render_image(
+        vertices,
+        faces,
+        reflectance,
+        camera.intrinsics,
+        camera.pose,
+        light,
+        response * (exposure * distance**2),
+        supersample=supersample,
+        caster=caster,
+    )
+    return image

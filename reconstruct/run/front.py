@@ -1,0 +1,221 @@
+"""The first half of ``rig reconstruct``: decode -> poses -> initial mesh -> visibility ->
+subdivide, each resumable, outputs in ``SESSION/recon/``; returns what the optimiser needs.
+
+Projector sessions (Gray-code frames in the manifest) build the initial mesh from structured
+light (:mod:`reconstruct.initial_mesh.procam`, into ``recon/procam/``) instead of the visual
+hull, hand the
+optimiser the projector's light position per view, and keep their structured-light frames out
+of the spectral observations."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+from rich import get_console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+from core.errors import RigError
+from core.session import RECON_DIR, Session
+from reconstruct.frames import decode
+from reconstruct.frames.decode import DecodeConfig, DecodedFrame, DecodeIndex
+from reconstruct.geometry import subdivide, visibility
+from reconstruct.geometry.subdivide import SubdivideConfig
+from reconstruct.geometry.visibility import Visibility, VisibilityConfig
+from reconstruct.initial_mesh import stage as initial_mesh
+from reconstruct.initial_mesh.dense.poisson import read_mesh
+from reconstruct.initial_mesh.procam import (
+    LIGHTS,
+    ProcamConfig,
+    has_gray_code,
+    procam_initial_mesh,
+    read_light_positions,
+)
+from reconstruct.initial_mesh.stage import MeshConfig, mesh_config
+from reconstruct.initial_mesh.structured_light import is_structured
+from reconstruct.model.camera import Intrinsics, Pose
+from reconstruct.poses import stage as poses
+from reconstruct.poses.stage import PosesConfig, PoseSummary
+from reconstruct.run.config_check import check_types
+from reconstruct.run.stages import attach_log_file
+
+log = logging.getLogger("reconstruct")
+
+
+@dataclass(frozen=True)
+class FrontConfig:
+    """Configuration of the five stages (each a section of the same name); ``procam`` replaces
+    ``mesh`` on projector sessions."""
+
+    decode: DecodeConfig = field(default_factory=DecodeConfig)
+    poses: PosesConfig = field(default_factory=PosesConfig)
+    mesh: MeshConfig = field(default_factory=MeshConfig)
+    visibility: VisibilityConfig = field(default_factory=VisibilityConfig)
+    subdivide: SubdivideConfig = field(default_factory=SubdivideConfig)
+    procam: ProcamConfig = field(default_factory=ProcamConfig)
+
+    @classmethod
+    def from_mapping(cls, data: Mapping[str, Any]) -> FrontConfig:
+        sections = {f.name: f for f in fields(cls)}
+        unknown = set(data) - set(sections)
+        if unknown:
+            raise RigError(
+                f"unknown reconstruction config section(s): {', '.join(sorted(unknown))}",
+                f"use {', '.join(sections)}",
+            )
+        built: dict[str, Any] = {}
+        for name, value in data.items():
+            kind = type(getattr(cls(), name))
+            if isinstance(value, kind):
+                built[name] = value
+                continue
+            if not isinstance(value or {}, Mapping):
+                raise RigError(f"config section {name} is {value!r}", "write key: value lines")
+            known = {f.name for f in fields(kind)}
+            bad = set(value or {}) - known
+            if bad:
+                raise RigError(
+                    f"unknown key(s) in config section {name}: {', '.join(sorted(bad))}",
+                    f"use {', '.join(sorted(known))}",
+                )
+            check_types(value or {}, getattr(cls(), name), f"config {name}")
+            built[name] = mesh_config(value or {}) if kind is MeshConfig else kind(**(value or {}))
+        return cls(**built)
+
+
+@dataclass
+class FrontResult:
+    """Everything the optimiser needs, as paths and loaded objects.
+
+    ``frames`` holds only the spectral observations: on projector sessions the Gray-code and
+    reference frames are left out. ``light_positions`` (view -> world position, metres) comes
+    from the projector's recovered placements; ``initial_light_positions`` is the same in the
+    order of ``sorted(poses)`` when every posed view has one, and ``light_mode_hint`` is then
+    ``"free"`` (one near point light per view); both are None on bulb sessions.
+    """
+
+    recon_dir: Path
+    decoded_dir: Path
+    intrinsics: dict[int, Intrinsics]
+    poses: dict[int, Pose]
+    pose_summary: PoseSummary
+    frames: dict[tuple[int, str], DecodedFrame]  # (view, illumination) -> decoded frame
+    initial_mesh_path: Path
+    mesh_path: Path
+    mesh: trimesh.Trimesh
+    visibility_path: Path
+    visibility: Visibility
+    skipped_frames: dict[str, str]  # frame path -> why it was left out
+    structured_light: bool = False
+    light_positions: dict[int, np.ndarray] = field(default_factory=dict)
+    initial_light_positions: np.ndarray | None = None
+    light_mode_hint: str | None = None
+
+    def frame_path(self, view: int, illumination: str) -> Path:
+        """The decoded float16 image of a (view, illumination)."""
+        return self.decoded_dir / self.frames[(view, illumination)].image
+
+    @property
+    def scale_is_metric(self) -> bool:
+        return self.pose_summary.scale == "metric"
+
+
+def _lights(
+    pose_map: Mapping[int, Pose], procam_dir: Path
+) -> tuple[dict[int, np.ndarray], np.ndarray | None]:
+    """Projector light position per view, and as an array over ``sorted(pose_map)`` when
+    every posed view has one."""
+    lights = read_light_positions(procam_dir)
+    missing = sorted(set(pose_map) - set(lights))
+    if missing:
+        log.warning("views %s have no projector light position (placement not recovered)",
+                    missing)
+        return lights, None
+    return lights, np.stack([lights[v] for v in sorted(pose_map)])
+
+
+def _mesh_config(conf: MeshConfig, session: Session, poses_dir: Path) -> MeshConfig:
+    """Poses in the board's frame (board poses, or known poses the board's corners agree
+    with): the silhouettes are cut against the board's known print (it is no dark
+    background) and the hull kept above it."""
+    summary = poses.load(poses_dir)[2]
+    in_board_frame = summary.source.startswith("board") or summary.extra.get("board_frame")
+    if conf.board is not None or not in_board_frame:
+        return conf
+    spec = poses.session_board(session.info)
+    return conf if spec is None else replace(conf, board=spec.to_dict())
+
+
+def run_front(
+    session_dir: Path,
+    conf: FrontConfig | Mapping[str, Any] | None = None,
+    initial_mesh_file: Path | None = None,
+) -> FrontResult:
+    """Run (or resume) the five stages on a session directory."""
+    session_dir = Path(session_dir)
+    conf = conf if isinstance(conf, FrontConfig) else FrontConfig.from_mapping(conf or {})
+    session = Session.open(session_dir)
+    projector = has_gray_code(session)
+    recon = session_dir / RECON_DIR
+    handler = attach_log_file(recon)
+    dirs = {
+        n: recon / n for n in ("decoded", "poses", "mesh", "procam", "visibility", "subdivide")
+    }
+    try:
+        with Progress(
+            TextColumn("[bold]{task.description}"), BarColumn(), TimeElapsedColumn(),
+            transient=True, disable=not get_console().is_terminal,  # no blank line in a log
+        ) as progress:
+            task = progress.add_task("reconstruct: decode", total=5)
+            decode.run(conf.decode, session_dir, dirs["decoded"])
+            progress.update(task, advance=1, description="reconstruct: poses")
+            poses.run(conf.poses, session_dir, dirs["decoded"], dirs["poses"])
+            progress.update(task, advance=1, description="reconstruct: initial mesh")
+            if projector and initial_mesh_file is None:
+                cams, view_poses, _ = poses.load(dirs["poses"])
+                mesh0 = procam_initial_mesh(
+                    session, view_poses, cams, conf.procam, dirs["procam"],
+                    decoded_dir=dirs["decoded"],
+                )
+            else:
+                mesh0 = initial_mesh.run(
+                    _mesh_config(conf.mesh, session, dirs["poses"]), dirs["decoded"],
+                    dirs["poses"], dirs["mesh"], initial_mesh_file,
+                )
+            progress.update(task, advance=1, description="reconstruct: visibility")
+            vis0 = visibility.run(conf.visibility, mesh0, dirs["poses"], dirs["visibility"])
+            progress.update(task, advance=1, description="reconstruct: subdivide")
+            fine = subdivide.run(
+                conf.subdivide, mesh0, vis0, dirs["poses"], dirs["subdivide"], conf.visibility
+            )
+            progress.update(task, advance=1)
+    finally:
+        log.removeHandler(handler)
+        handler.close()
+    intrinsics, pose_map, summary = poses.load(dirs["poses"])
+    index = DecodeIndex.load(dirs["decoded"])
+    frames = {
+        (f.view, f.illumination): f
+        for f in index.frames
+        if f.view in pose_map and not (projector and is_structured(f.illumination))
+    }
+    if projector and not frames:
+        raise RigError(
+            f"{session_dir} has only structured-light frames: nothing to measure reflectance "
+            "from", "capture the projector's uniform colours too (the plan's illuminations)",
+        )
+    vis_path = dirs["subdivide"] / visibility.FILE
+    result = FrontResult(
+        recon, dirs["decoded"], intrinsics, pose_map, summary, frames, mesh0, fine,
+        read_mesh(fine), vis_path, Visibility.load(vis_path), dict(index.skipped), projector,
+    )
+    if projector and (dirs["procam"] / LIGHTS).is_file():
+        result.light_positions, result.initial_light_positions = _lights(pose_map, dirs["procam"])
+        if result.initial_light_positions is not None:
+            result.light_mode_hint = "free"
+    return result

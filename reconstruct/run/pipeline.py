@@ -1,0 +1,489 @@
+"""``rig reconstruct`` as a library call: the front stages (decode → poses → initial mesh →
+visibility → subdivide), the joint optimisation, and the files of ``SESSION/recon/``.
+
+Config (YAML, all optional): the front's sections ``decode``, ``poses``, ``mesh``,
+``procam``, ``visibility``, ``subdivide`` and ``optimise`` (:class:`OptimiseSettings`, with
+``solver``). On projector sessions the front recovers one light position per view; the
+optimiser then starts from them and, unless ``optimise.light_mode`` says otherwise, keeps them
+fixed (``fixed``) as the paper does.
+
+A run is tracked in ``recon/status.json`` (:mod:`reconstruct.run.status`), the optimisation
+resumes from ``recon/optimise/checkpoint.npz`` (:mod:`reconstruct.optimise.checkpoint`) and the
+outputs are swapped in as one set (:mod:`reconstruct.run.publish`), so a kill at any instant loses
+at most the stage in progress and never leaves old and new outputs mixed.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibration.basis import SpectralBasis, default_basis
+from calibration.grid import DEFAULT_GRID
+from calibration.store import CalibrationStore
+from core.errors import RigError
+from core.session import RECON_DIR, Session
+from core.yamlio import read_yaml
+from reconstruct.frames.ambient import AMBIENT, exposure_ratio, subtract_ambient
+from reconstruct.frames.decode import FLOAT16_RANGE, load_frame
+from reconstruct.model.camera import Intrinsics
+from reconstruct.model.forward import response_matrix
+from reconstruct.model.raycast import RayCaster
+from reconstruct.optimise.checkpoint import FILE as CHECKPOINT_FILE
+from reconstruct.optimise.checkpoint import Checkpoint, input_key
+from reconstruct.optimise.mesh import vertex_normals
+from reconstruct.optimise.problem import Frames, Rig
+from reconstruct.optimise.solver import IterationRecord
+from reconstruct.optimise.steps import OptimiseInput, OptimiseResult, OptimiseSettings, optimise
+from reconstruct.outputs import export, plots
+from reconstruct.outputs.relight import Camera, encode_srgb, relight
+from reconstruct.run.front import FrontConfig, FrontResult, run_front
+from reconstruct.run.memory import peak_rss_mb, reset_peak_rss
+from reconstruct.run.publish import publish, staging_dir
+from reconstruct.run.stages import TIMINGS, record_timing
+from reconstruct.run.status import RunStatus, tracked
+
+log = logging.getLogger("reconstruct")
+FRONT_SECTIONS = ("decode", "poses", "mesh", "procam", "visibility", "subdivide")
+Progress = Callable[[str, IterationRecord], None]
+
+
+@dataclass
+class Reconstruction:
+    recon_dir: Path
+    mesh_path: Path
+    reflectance_path: Path
+    report_path: Path
+    plots: list[Path]
+    result: OptimiseResult
+    report: dict[str, Any]
+
+
+def load_config(path: Path | None) -> dict[str, Any]:
+    """The reconstruct config file as a mapping (empty without a file)."""
+    if path is None:
+        return {}
+    data = read_yaml(Path(path), "config", "fix the YAML syntax (indentation, repeated keys)")
+    data = {} if data is None else data
+    if not isinstance(data, dict):
+        raise RigError(f"config {path} is not a mapping", "write sections like `optimise: {...}`")
+    unknown = set(data) - {*FRONT_SECTIONS, "optimise"}
+    if unknown:
+        raise RigError(
+            f"config {path}: unknown section(s) {', '.join(sorted(unknown))}",
+            f"use {', '.join((*FRONT_SECTIONS, 'optimise'))}",
+        )
+    # Checked now, not when the stage is reached minutes later.
+    try:
+        FrontConfig.from_mapping({k: v for k, v in data.items() if k in FRONT_SECTIONS})
+    except RigError as error:
+        raise RigError(f"config {path}: {error.problem}", error.fix) from error
+    except TypeError as error:  # a nested section's dataclass rejected a key
+        raise RigError(f"config {path}: {error}", "check the section's keys") from error
+    OptimiseSettings.from_mapping(data.get("optimise"), f"config {path} optimise")
+    return data
+
+
+def session_spectra(session: Session, names: list[str]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Camera sensitivity and the SPD of each illumination from the session's calibration
+    snapshot (entries named in ``session.yaml`` → ``calibration``)."""
+    cal = session.info.get("calibration") or {}
+    if not session.calibration_dir.is_dir() or "camera" not in cal:
+        raise RigError(
+            f"{session.root} has no calibration snapshot (calibration/ and session.yaml "
+            "calibration.camera)",
+            "capture with a profile that names a calibration store",
+        )
+    store = CalibrationStore(session.calibration_dir)
+    camera = store.camera(str(cal["camera"]), DEFAULT_GRID)
+    lights = cal.get("lights") or {}
+    spds = {}
+    for name in names:
+        entry = str(lights.get(name, name))
+        if entry not in store.names("light"):
+            raise RigError(
+                f"illumination {name!r} has no SPD in {session.calibration_dir} (entry {entry!r})",
+                "measure it with `rig calibrate wizard` (or add it with `rig calibrate import "
+                "SPD.txt --kind light --name NAME`) or name its store entry in the profile",
+            )
+        spds[name] = store.light_spd(entry, DEFAULT_GRID)
+    return camera, spds
+
+
+def _scaled(intr: Intrinsics, width: int, height: int) -> Intrinsics:
+    """Intrinsics of another image size (SfM may run on downscaled images)."""
+    if (intr.width, intr.height) == (width, height):
+        return intr
+    s = width / intr.width
+    if abs(height / intr.height - s) > 1e-3:
+        raise RigError(
+            f"decoded frames are {width}x{height} but the camera is {intr.width}x{intr.height}",
+            "re-run the poses stage on the decoded frames",
+        )
+    names = {"f", "fx", "fy", "cx", "cy"}
+    from reconstruct.model.camera import CAMERA_MODELS
+
+    params = tuple(
+        p * s if n in names else p
+        for n, p in zip(CAMERA_MODELS[intr.model], intr.params, strict=True)
+    )
+    return Intrinsics(intr.model, width, height, params)
+
+
+def lit_frame(front: FrontResult, key: tuple[int, str]) -> tuple[np.ndarray, np.ndarray, float]:
+    """A lit frame (image, saturation mask, noise weight), with the view's ambient frame
+    subtracted when the session has one (:mod:`reconstruct.frames.ambient`)."""
+    frame = front.frames[key]
+    img, sat = load_frame(front.decoded_dir, frame)
+    amb = front.frames.get((key[0], AMBIENT))
+    if amb is None:
+        return img, sat, 1.0
+    amb_img, amb_sat = load_frame(front.decoded_dir, amb)
+    if amb_img.shape != img.shape:
+        raise RigError(
+            f"ambient frame {amb.image} is {amb_img.shape[1]}x{amb_img.shape[0]} but lit frame "
+            f"{frame.image} is {img.shape[1]}x{img.shape[0]}",
+            "capture the ambient frame with the same camera and image size",
+        )
+    ratio = exposure_ratio(frame.exposure_s, frame.iso, amb.exposure_s, amb.iso)
+    out = subtract_ambient(img, ~sat, amb_img, ~amb_sat, ratio, f"view {key[0]} {key[1]}")
+    return out.image, ~out.valid, out.weight
+
+
+def optimiser_input(front: FrontResult, session: Session, basis: SpectralBasis) -> OptimiseInput:
+    """Arrays the optimiser needs from the front's outputs and the calibration snapshot."""
+    views = sorted(front.poses)
+    column = {v: k for k, v in enumerate(views)}
+    plan = (session.info.get("plan") or {}).get("illuminations")
+    lit = set(plan) if isinstance(plan, list) else None  # ambient / pattern frames are not lit
+    keys = sorted(k for k in front.frames if k[0] in column and (lit is None or k[1] in lit))
+    if not keys:
+        raise RigError(
+            "no decoded frame under a named illumination belongs to a posed view",
+            "check the poses stage output and the session's plan.illuminations",
+        )
+    names = sorted({k[1] for k in keys})
+    camera, spds = session_spectra(session, names)
+    responses = np.stack([response_matrix(camera, spds[n]) for n in names])
+    # Filled in place: a list of frames stacked then cast held the frames three times over.
+    # float16 as the decode cache keeps them (its rounding is far below sensor noise): half the
+    # largest array of the solve (0.23 GB at 80 frames of 800×600); samples are float64.
+    first = lit_frame(front, keys[0])
+    h, w = first[0].shape[:2]
+    images = np.empty((len(keys), h, w, 3), dtype=np.float16)
+    valid = np.empty((len(keys), h, w), dtype=bool)
+    weight = np.empty(len(keys))
+    for f, key in enumerate(keys):
+        img, sat, weight[f] = first if f == 0 else lit_frame(front, key)
+        if img.shape[:2] != (h, w):
+            raise RigError(
+                f"frame view {key[0]} {key[1]} is {img.shape[1]}x{img.shape[0]} but view "
+                f"{keys[0][0]} {keys[0][1]} is {w}x{h}",
+                "capture every frame of a session with the same camera and image size",
+            )
+        if images.dtype == np.float16 and float(np.max(img, initial=0.0)) >= FLOAT16_RANGE:
+            images = images.astype(np.float32)  # exposure normalisation went past float16
+        images[f] = img
+        valid[f] = ~sat
+    frames = Frames(
+        np.array([column[k[0]] for k in keys]),
+        np.array([names.index(k[1]) for k in keys]),
+        images,
+        valid,
+        weight,
+    )
+    intr = [_scaled(front.intrinsics[v], w, h) for v in views]
+    rig = Rig(intr, [front.poses[v] for v in views], responses)
+    mesh = front.mesh
+    vis = front.visibility
+    n = len(mesh.vertices)
+    matrix = np.zeros((n, len(views)), dtype=bool)
+    vi, col = vis.pairs()
+    view_of = np.asarray(vis.views)[col]
+    known = np.isin(view_of, views)
+    matrix[vi[known], [column[int(v)] for v in view_of[known]]] = True
+    return OptimiseInput(
+        vertices=np.asarray(mesh.vertices, dtype=float),
+        faces=np.asarray(mesh.faces, dtype=np.int64),
+        visibility=matrix,
+        rig=rig,
+        frames=frames,
+        basis=basis,
+    )
+
+
+def export_result(
+    recon_dir: Path,
+    inp: OptimiseInput,
+    result: OptimiseResult,
+    settings: OptimiseSettings,
+    extra: dict[str, Any],
+    preview_views: int = 3,
+) -> tuple[list[Path], dict[str, Any], Path, Path, Path]:
+    """Write mesh.ply, reflectance.npz, report.json and the plots."""
+    recon_dir.mkdir(parents=True, exist_ok=True)
+    wl = inp.basis.wavelengths_nm
+    normals, _ = vertex_normals(result.vertices, result.faces)
+    unc = result.uncertainty
+    std = None if unc is None else unc.reflectance_std
+    arrays = (
+        {}
+        if unc is None
+        else {"reflectance_std": unc.reflectance_std, "position_std_m": unc.position_std_m}
+    )
+    # the 2-D estimate the joint solve started from, for viewers comparing the two
+    arrays["initial_reflectance"] = inp.basis.reconstruct(result.initial_alpha)
+    ply_extra = (
+        {}
+        if unc is None
+        else {
+            **{f"refl_std_{round(w)}": unc.reflectance_std[:, k] for k, w in enumerate(wl)},
+            "position_std_m": unc.position_std_m,
+        }
+    )
+    mesh_path = export.write_ply(
+        recon_dir / export.MESH_FILE,
+        result.vertices,
+        result.faces,
+        normals,
+        result.reflectance,
+        wl,
+        ply_extra,
+    )
+    npz = export.write_reflectance_npz(
+        recon_dir / export.REFLECTANCE_FILE,
+        result.vertices,
+        result.faces,
+        normals,
+        wl,
+        result.reflectance,
+        result.alpha,
+        inp.basis.B,
+        result.observed,
+        arrays,
+    )
+    rig = inp.rig
+    figures = [
+        plots.cameras_and_lights(
+            recon_dir / "cameras_lights.png", rig.poses, result.light_positions, result.vertices
+        ),
+        plots.cost_curve(recon_dir / "cost.png", result.history),
+    ]
+    rng = np.random.default_rng(0)
+    seen = np.flatnonzero(result.observed)
+    sample = np.sort(rng.choice(seen, size=min(6, seen.size), replace=False)) if seen.size else seen
+    figures.append(
+        plots.spectra(
+            recon_dir / "spectra.png",
+            wl,
+            result.reflectance,
+            sample,
+            initial=inp.basis.reconstruct(result.initial_alpha),
+            std=std,
+        )
+    )
+    if std is not None:
+        figures.append(
+            plots.error_histogram(
+                recon_dir / "uncertainty.png",
+                np.mean(std, axis=1),  # NaN rows (unobserved) are left out
+                "per-vertex reflectance std (mean over wavelengths)",
+            )
+        )
+    caster = RayCaster(result.vertices, result.faces)
+    for c in np.linspace(0, rig.n_views - 1, min(preview_views, rig.n_views)).astype(int):
+        img = relight(
+            result.vertices,
+            result.faces,
+            result.reflectance,
+            wl,
+            Camera(rig.intrinsics[c], rig.poses[c]),
+            result.light_positions[c],
+            "D65",
+            caster=caster,
+        )
+        figures.append(
+            plots.image(
+                recon_dir / f"preview_view{c:03d}.png",
+                encode_srgb(img),
+                f"view {c}: estimated reflectance under D65 at the estimated light",
+            )
+        )
+    offset = result.light[0] if settings.light_mode == "offset" else None
+    report = {
+        "light": {
+            "mode": settings.light_mode,
+            "offset_m": None if offset is None else offset.tolist(),
+            "positions_m": result.light_positions.tolist(),
+        },
+        "vertices": len(result.vertices),
+        "faces": len(result.faces),
+        "observed_vertices": int(result.observed.sum()),
+        "observations": result.n_observations,
+        "uncertainty": None if unc is None else unc.summary(),
+        "history": result.history,
+        "timings_s": {**extra.pop("timings_s", {}), **result.stage_seconds},
+        "settings": asdict(settings),
+        **extra,
+    }
+    report_path = export.write_report(recon_dir / export.REPORT_FILE, report)
+    return figures, report, mesh_path, npz, report_path
+
+
+# Below this ratio of the farthest to the nearest camera distance the light's distance on the
+# camera plate trades against the reflectance scale (all views see the same inverse-square
+# falloff): on the sim's torus at one 0.55 m ring the offset ended 22 mm out along the optical
+# axis, with views stepping between 0.35 and 0.65 m 3 mm (docs/usage-reconstruct.md).
+MIN_DISTANCE_RATIO = 1.3
+
+
+def camera_distances(inp: OptimiseInput) -> dict[str, float]:
+    """Camera-to-object distances (to the mesh centroid): how well the capture pins down the
+    light's distance apart from the reflectance scale."""
+    centre = np.mean(inp.vertices, axis=0)
+    d = np.array([np.linalg.norm(pose.center - centre) for pose in inp.rig.poses])
+    return {
+        "min": float(d.min()),
+        "median": float(np.median(d)),
+        "max": float(d.max()),
+        "ratio": float(d.max() / max(d.min(), 1e-12)),
+    }
+
+
+def warn_if_light_distance_weak(distances: dict[str, float], light_mode: str) -> None:
+    """Tell the user, before the long solve, when every view is at about the same distance."""
+    if light_mode != "offset" or distances["ratio"] >= MIN_DISTANCE_RATIO:
+        return
+    log.warning(
+        "all views are %.2f-%.2f m from the object (ratio %.2f < %.1f): the light's distance on "
+        "the camera plate is weakly observable and may end centimetres off along the optical "
+        "axis; capture some views closer and some farther (e.g. 0.7x and 1.3x the usual "
+        "distance) next time",
+        distances["min"],
+        distances["max"],
+        distances["ratio"],
+        MIN_DISTANCE_RATIO,
+    )
+
+
+def projector_lights(
+    front: FrontResult, settings: OptimiseSettings, explicit_mode: bool
+) -> np.ndarray | None:
+    """The initial light positions on projector sessions (None otherwise); without an explicit
+    ``optimise.light_mode`` the settings switch to ``fixed`` lights at those positions."""
+    if front.light_mode_hint != "free" or front.initial_light_positions is None:
+        return None
+    if not explicit_mode:
+        settings.light_mode = "fixed"
+    if settings.light_mode == "offset":
+        return None
+    return np.asarray(front.initial_light_positions, dtype=float)
+
+
+def run_reconstruction(
+    session_dir: Path,
+    config: Mapping[str, Any] | None = None,
+    initial_mesh: Path | None = None,
+    progress: Progress | None = None,
+    basis: SpectralBasis | None = None,
+) -> Reconstruction:
+    """Both halves of the pipeline on a session; outputs in ``SESSION/recon/``."""
+    session_dir = Path(session_dir)
+    conf = dict(config or {})
+    opt_conf = conf.pop("optimise", None)
+    settings = OptimiseSettings.from_mapping(opt_conf, "config optimise")
+    session = Session.open(session_dir)
+    recon = session_dir / RECON_DIR
+    with tracked(recon) as status:
+        rec = _run(session, conf, opt_conf, settings, initial_mesh, progress, basis, status)
+        if rec.report["skipped_frames"]:
+            status.end("complete", skipped_frames=len(rec.report["skipped_frames"]))
+    return rec
+
+
+def front_peaks(recon: Path) -> dict[str, float | None]:
+    """Each front stage's peak resident memory (MB) from ``timings.json``; None for a stage
+    this run skipped (done before)."""
+    try:
+        timings = json.loads((recon / TIMINGS).read_text())
+    except (OSError, ValueError):
+        return {}
+    return {
+        name: entry.get("peak_rss_mb")
+        for name, entry in timings.items()
+        if isinstance(entry, dict) and name not in ("optimise", "export")
+    }
+
+
+def _run(
+    session: Session,
+    conf: dict[str, Any],
+    opt_conf: Mapping[str, Any] | None,
+    settings: OptimiseSettings,
+    initial_mesh: Path | None,
+    progress: Progress | None,
+    basis: SpectralBasis | None,
+    status: RunStatus,
+) -> Reconstruction:
+    session_dir = session.root
+    t0 = time.perf_counter()
+    status.stage("front")
+    front = run_front(
+        session_dir, {k: v for k, v in conf.items() if k in FRONT_SECTIONS}, initial_mesh
+    )
+    t_front = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    inp = optimiser_input(front, session, basis or default_basis())
+    inp.initial_light = projector_lights(front, settings, "light_mode" in (opt_conf or {}))
+    t_load = time.perf_counter() - t0
+    distances = camera_distances(inp)
+    warn_if_light_distance_weak(distances, settings.light_mode)
+    recon = session_dir / RECON_DIR
+    t0 = time.perf_counter()
+    status.stage("optimise")
+    checkpoint = Checkpoint(recon / "optimise" / CHECKPOINT_FILE, input_key(inp, settings))
+    reset_peak_rss()
+    result = optimise(inp, settings, progress, checkpoint)
+    peaks = {**front_peaks(recon), "optimise": round(peak_rss_mb(), 1)}
+    record_timing(recon, "optimise", time.perf_counter() - t0, False, peaks["optimise"])
+    t0 = time.perf_counter()
+    reset_peak_rss()
+    absolute = front.scale_is_metric
+    extra = {
+        "reflectance_scale_absolute": bool(absolute),
+        "reflectance_scale_note": (
+            "absolute: metric poses and radiometrically scaled calibration SPDs"
+            if absolute
+            else "relative: poses have no metric scale, so the light distance and the "
+            "reflectance scale are only known up to a common factor"
+        ),
+        "poses": {"source": front.pose_summary.source, "scale": front.pose_summary.scale},
+        "camera_distance_m": distances,
+        "initial_mesh": str(front.mesh_path),
+        "illuminations": sorted({k[1] for k in front.frames}),
+        "skipped_frames": dict(front.skipped_frames),
+        "timings_s": {"front": t_front, "load_frames": t_load},
+        "peak_rss_mb": peaks,
+    }
+    status.stage("export")
+    staging = staging_dir(recon)
+    figures, report, mesh_path, npz, report_path = export_result(
+        staging, inp, result, settings, extra
+    )
+    report["timings_s"]["export"] = time.perf_counter() - t0
+    report["peak_rss_mb"]["export"] = round(peak_rss_mb(), 1)
+    export.write_report(report_path, report)
+    publish(recon, staging)
+    record_timing(
+        recon, "export", report["timings_s"]["export"], False, report["peak_rss_mb"]["export"]
+    )
+    mesh_path, npz, report_path = (recon / p.name for p in (mesh_path, npz, report_path))
+    figures = [recon / p.name for p in figures]
+    return Reconstruction(recon, mesh_path, npz, report_path, figures, result, report)
