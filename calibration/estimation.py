@@ -27,13 +27,16 @@ BATCH = 65536
 
 
 def response_matrices(camera: np.ndarray, spds: list[np.ndarray] | np.ndarray) -> np.ndarray:
-    """``A_k = Cᵀ diag(L_k)`` for every SPD: (K, 3, N_λ)."""
+    """``A_k = Cᵀ diag(L_k)`` for every SPD: camera sensitivity (N_λ, 3) and K light SPDs
+    (K, N_λ) -> (K, 3, N_λ). Multiplying a reflectance (N_λ,) by ``A_k`` gives the RGB of a
+    unit-shading, unshadowed point under light k (the forward model's response)."""
     c = np.asarray(camera, dtype=float)
     lights = np.atleast_2d(np.asarray(spds, dtype=float))
     if c.ndim != 2 or c.shape[1] != 3 or lights.shape[1] != c.shape[0]:
         raise RigError(
             f"camera {c.shape} and light SPDs {lights.shape} are not on the same grid",
-            "resample both onto the spectral grid (N_λ, 3) and (K, N_λ)",
+            "resample both onto the same spectral grid (calibration.spectra.resample): "
+            "(N_λ, 3) and (K, N_λ)",
         )
     return np.einsum("ln,kl->knl", c, lights)
 

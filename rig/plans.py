@@ -14,12 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core import labels
 from drivers.projectors import patterns
 from rig.profile import Plan
 
-AMBIENT = "ambient"
 KINDS = ("ambient", "illumination", "pattern")
-REFERENCES = ("white", "black")  # flat projector frames of the structured-light sequence
 
 
 @dataclass(frozen=True)
@@ -28,7 +27,7 @@ class FrameSpec:
 
     frame: int
     view: int
-    label: str  # illumination name, "ambient", or a structured-light pattern id
+    label: str  # illumination name or a core.labels label (ambient, structured light)
     kind: str  # one of KINDS
     placement: int | None = None  # projector placement lighting the view (None: on the plate)
 
@@ -71,40 +70,33 @@ class Trigger:
 Msg = MoveProjector | MoveTo | SetLight | ShowPattern | Trigger
 
 
-def gray_code_patterns(width: int, height: int) -> list[str]:
-    """Pattern ids of the structured-light sequence: the flat references ``white`` and
-    ``black``, then Gray-code columns and rows (``gray-col-00``, ``gray-col-00-inv``, ... most
-    significant bit first) as ``drivers.projectors.patterns`` and the decoder name them."""
-    ids = list(REFERENCES)
-    for axis, size in (("col", width), ("row", height)):
-        for bit in range(patterns.bit_count(size)):
-            ids += [patterns.pattern_id(axis, bit, False), patterns.pattern_id(axis, bit, True)]
-    return ids
-
-
 def pattern_image(pattern: str, width: int, height: int) -> np.ndarray:
-    """The (height, width) uint8 image of a pattern id of :func:`gray_code_patterns`, made
-    when it is shown (a full sequence at projector resolution need not sit in memory)."""
-    if pattern in REFERENCES:
-        return np.full((height, width), 255 if pattern == "white" else 0, dtype=np.uint8)
-    _, axis, bit, *inverse = pattern.split("-")
-    return patterns.gray_code_image(width, height, axis, int(bit), bool(inverse))
+    """The (height, width) uint8 image of a structured-light label
+    (:func:`core.labels.structured_light_labels`), made when it is shown (a full sequence at
+    projector resolution need not sit in memory)."""
+    if labels.is_reference(pattern):
+        white = pattern.removeprefix("sl-") == labels.WHITE
+        return np.full((height, width), 255 if white else 0, dtype=np.uint8)
+    pid = labels.parse_pattern_id(pattern)
+    if pid is None:
+        raise ValueError(f"{pattern!r} is no structured-light pattern label")
+    return patterns.gray_code_image(width, height, pid.axis, pid.bit, pid.inverse)
 
 
 def frame_list(plan: Plan, projector_size: tuple[int, int] | None = None) -> list[FrameSpec]:
     """Every frame of the session in capture order: per view the optional ambient frame,
     then each illumination, then the structured-light patterns; each tagged with the
     projector placement of its view when the plan moves the projector on its own."""
-    patterns: list[str] = []
+    sequence: list[str] = []
     if plan.structured_light is not None and plan.structured_light.gray_code:
         if projector_size is None:
             raise ValueError("a structured-light plan needs the projector's size")
-        patterns = gray_code_patterns(*projector_size)
+        sequence = labels.structured_light_labels(*projector_size)
     frames: list[FrameSpec] = []
     for view in range(plan.views):
-        per_view = [(AMBIENT, "ambient")] if plan.ambient else []
+        per_view = [(labels.AMBIENT, "ambient")] if plan.ambient else []
         per_view += [(name, "illumination") for name in plan.illuminations]
-        per_view += [(pattern, "pattern") for pattern in patterns]
+        per_view += [(pattern, "pattern") for pattern in sequence]
         placement = None if plan.projector is None else plan.projector.of_view(view)
         frames += [
             FrameSpec(len(frames) + k, view, label, kind, placement)

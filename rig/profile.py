@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from core.errors import RigError
+from core.labels import is_reserved
 from core.yamlio import read_yaml
 from reconstruct.poses.board import BoardSpec
 
@@ -31,7 +32,6 @@ LOCAL_DRIVERS = {
     "spectrometer": ("sim",),
 }
 MOUNT_TYPES = ("plate", "free")
-RESERVED_LABELS = ("ambient", "white", "black")  # frame labels that are not illuminations
 POSE_MODES = ("estimate", "known")
 TOP_KEYS = (
     "name",
@@ -366,8 +366,7 @@ class _Validator:
             key = f"illuminations.{name}"
             if (
                 not isinstance(name, str)
-                or name in RESERVED_LABELS
-                or name.startswith("gray-")
+                or is_reserved(name)
                 or not name.replace("-", "_").isidentifier()
             ):
                 raise self.fail(

@@ -478,15 +478,10 @@ class Reference:
 def region_rgb(path: Path, region: tuple[int, int, int, int] | None) -> tuple[np.ndarray, bool]:
     """Mean of each CFA colour (R, G, B) in ``region`` of a RAW frame, in (raw − black) /
     (white − black), and whether any pixel there is saturated (no demosaicing needed)."""
-    import rawpy
+    from reconstruct.frames.raw import read_mosaic
 
-    with rawpy.imread(str(path)) as raw:
-        values = raw.raw_image_visible.astype(np.float64)
-        colours = raw.raw_colors_visible.copy()
-        desc = raw.color_desc.decode()
-        black = np.asarray(raw.black_level_per_channel, dtype=float)[colours]
-        white = float(raw.white_level)
-    height, width = values.shape
+    mosaic = read_mosaic(path)
+    height, width = mosaic.values.shape
     if region is None:
         side = max(4, int(REGION_FRACTION * min(height, width)) // 2 * 2)
         region = (
@@ -502,10 +497,10 @@ def region_rgb(path: Path, region: tuple[int, int, int, int] | None) -> tuple[np
             "give X0,Y0,X1,Y1 inside the image",
         )
     window = (slice(y0, y1), slice(x0, x1))
-    level = (values[window] - black[window]) / (white - black[window])
-    letters = np.array(list(desc))[colours[window]]
+    level = mosaic.levels(window, np.float64)
+    letters = np.array(list(mosaic.colour_desc))[mosaic.colours[window]]
     rgb = np.array([level[letters == c].mean() for c in "RGB"])
-    return rgb, bool(np.any(values[window] >= white))
+    return rgb, bool(np.any(mosaic.values[window] >= mosaic.white))
 
 
 def open_reference(

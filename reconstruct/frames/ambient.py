@@ -1,6 +1,7 @@
-"""Room-light (ambient) subtraction: a view's ``ambient`` frame (bulb off) holds what the room
-adds to every lit frame of that view, so lit − ambient (scaled to the lit frame's exposure, in
-linear camera units) is what the bulb alone lit — the forward model's image.
+"""Room-light (ambient) subtraction: a view's ``ambient`` frame (``core.labels.AMBIENT``, bulb
+off) holds what the room adds to every lit frame of that view, so lit − ambient (scaled to the
+lit frame's exposure, in linear camera units) is what the bulb alone lit — the forward model's
+image.
 
 The difference is noisier than a frame taken in the dark: the variances of both frames add.
 With shot noise (variance ∝ signal) a lit frame holding bulb signal b and room signal a has
@@ -26,7 +27,6 @@ import cv2
 import numpy as np
 
 log = logging.getLogger(__name__)
-AMBIENT = "ambient"  # the frame label of a view's bulb-off frame (rig.plans)
 ALIGN_SIDE = 256  # longest side (px) of the copies the alignment check correlates
 FALLBACK_WEIGHT = 0.5
 

@@ -1,11 +1,9 @@
 """Decode stage: RAW (or linear TIFF/NPY) frames -> linear camera RGB + saturation masks.
 
 Values follow DESIGN.md: ``y = (raw - black) / (white - black) / (exposure_s * iso / 100)``,
-demosaiced in camera RGB with no white balance, colour matrix or gamma. LibRaw is told not to
-stretch the histogram (``no_auto_bright``, ``adjust_maximum_thr=0``), otherwise the gain would
-change from shot to shot. Its 16-bit output is then exactly ``65535 (raw - black) / (white -
-black)``. A pixel is saturated when any mosaic sample in its demosaic neighbourhood is at or
-near the white level; such pixels are never used.
+demosaiced in camera RGB with no white balance, colour matrix or gamma (RAW files are read by
+:mod:`reconstruct.frames.raw`). A pixel is saturated when any mosaic sample in its demosaic
+neighbourhood is at or near the white level; such pixels are never used.
 
 Outputs in ``recon/decoded/``: ``<frame>.npy`` (H x W x 3, float16, or float32 beyond its
 range), ``<frame>_sat.npy`` (bool mask), ``index.json`` (frame -> view, illumination, files,
@@ -31,6 +29,7 @@ from scipy.ndimage import maximum_filter
 
 from core.errors import RigError
 from core.session import FrameRecord, Session, verify_frames, write_bytes_atomically
+from reconstruct.frames.raw import DEMOSAIC, read_linear_rgb
 from reconstruct.run.stages import run_stage
 
 log = logging.getLogger("reconstruct.frames.decode")
@@ -38,15 +37,6 @@ log = logging.getLogger("reconstruct.frames.decode")
 INDEX = "index.json"
 SFM_DIR = "sfm"
 FLOAT16_RANGE = 6e4  # largest value a frame may hold to be kept as float16 (max 65504)
-DEMOSAIC = {
-    "linear": rawpy.DemosaicAlgorithm.LINEAR,
-    "vng": rawpy.DemosaicAlgorithm.VNG,
-    "ppg": rawpy.DemosaicAlgorithm.PPG,
-    "ahd": rawpy.DemosaicAlgorithm.AHD,
-    "dcb": rawpy.DemosaicAlgorithm.DCB,
-    "dht": rawpy.DemosaicAlgorithm.DHT,
-    "aahd": rawpy.DemosaicAlgorithm.AAHD,
-}
 LINEAR_SUFFIXES = {".npy", ".tif", ".tiff"}
 
 
@@ -122,40 +112,17 @@ def load_frame(out_dir: Path, frame: DecodedFrame) -> tuple[np.ndarray, np.ndarr
     return image, np.load(out_dir / frame.saturated)
 
 
-def postprocess_linear(raw: rawpy.RawPy, demosaic: str) -> np.ndarray:
-    """LibRaw's demosaic with nothing else: black subtracted, scaled so white = 65535, no white
-    balance, no colour matrix, gamma 1, and a fixed maximum (``adjust_maximum_thr=0``) so the
-    gain never changes from shot to shot."""
-    return raw.postprocess(
-        demosaic_algorithm=DEMOSAIC[demosaic],
-        use_camera_wb=False,
-        use_auto_wb=False,
-        user_wb=[1.0, 1.0, 1.0, 1.0],
-        output_color=rawpy.ColorSpace.raw,
-        gamma=(1, 1),
-        output_bps=16,
-        no_auto_bright=True,
-        adjust_maximum_thr=0.0,
-        user_flip=0,
-    )
-
-
 def decode_raw(path: Path, demosaic: str, saturation: float) -> tuple[np.ndarray, np.ndarray]:
     """RAW file -> ((raw - black) / (white - black) in camera RGB, saturation mask)."""
-    with rawpy.imread(str(path)) as raw:
-        mosaic = raw.raw_image_visible.astype(np.float32)
-        blacks = np.asarray(raw.black_level_per_channel, dtype=np.float32)
-        black = blacks[raw.raw_colors_visible]
-        white = float(raw.white_level)
-        rgb = postprocess_linear(raw, demosaic)
-    clipped = (mosaic - black) >= saturation * (white - black)
+    mosaic, rgb = read_linear_rgb(path, demosaic)
+    clipped = mosaic.clipped(saturation)
     # the demosaic reads a neighbourhood: a pixel is unusable if any sample near it clipped
     radius = 1 if demosaic == "linear" else 2
     mask = maximum_filter(clipped, size=2 * radius + 1)
     if mask.shape != rgb.shape[:2]:
         size = (int(rgb.shape[1]), int(rgb.shape[0]))
         mask = cv2.resize(mask.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
-    return rgb.astype(np.float32) / 65535.0, mask
+    return rgb, mask
 
 
 def decode_linear(

@@ -17,6 +17,8 @@ Manifest frames name their placement in ``projector_placement`` (any JSON value)
 ``auto`` picks ``plate``. Points go through a vectorised multi-view DLT, are rejected by
 reprojection error, triangulation angle and cheirality, get PCA normals facing the cameras,
 and are meshed by screened Poisson (``pycolmap.poisson_meshing``, CPU), trimmed to the cloud.
+The geometry lives beside this stage: :mod:`~reconstruct.initial_mesh.triangulation`,
+:mod:`~reconstruct.initial_mesh.projector_pose`, :mod:`~reconstruct.initial_mesh.point_cloud`.
 
 Outputs in ``out_dir``: ``initial.ply``, ``points.ply`` (oriented cloud), ``lights.json``
 (per-view projector light position, for the optimiser's free-light mode), ``procam.json``
@@ -27,7 +29,6 @@ from __future__ import annotations
 
 import json
 import logging
-import tempfile
 from collections import defaultdict
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
@@ -35,28 +36,31 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
-import pycolmap
-import trimesh
 from rich.progress import track
-from scipy.linalg import rq
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from core.errors import RigError
+from core.labels import REFERENCES, is_structured
 from core.session import FrameRecord, Session, write_bytes_atomically
 from reconstruct.frames.decode import INDEX, LINEAR_SUFFIXES, DecodeIndex, decode_linear, decode_raw
 from reconstruct.frames.decode import load_frame as load_decoded
-from reconstruct.initial_mesh.dense.poisson import read_mesh, write_oriented_ply
-from reconstruct.initial_mesh.structured_light import (
-    DecodeOptions,
-    GrayDecoding,
-    decode_gray,
-    is_structured,
+from reconstruct.initial_mesh.dense.poisson import poisson_mesh, write_oriented_ply
+from reconstruct.initial_mesh.point_cloud import (
+    drop_outliers,
+    keep_large_pieces,
+    oriented_normals,
+    trim_to_cloud,
 )
-from reconstruct.model.camera import Intrinsics, Pose, project
+from reconstruct.initial_mesh.projector_pose import light_positions, projector_pose
+from reconstruct.initial_mesh.structured_light import DecodeOptions, GrayDecoding, decode_gray
+from reconstruct.initial_mesh.triangulation import (
+    Observer,
+    block_centroids,
+    check_points,
+    match_blocks,
+    triangulate,
+)
+from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.poses import stage as poses_stage
 from reconstruct.run.stages import run_stage
 
@@ -103,103 +107,6 @@ class ProcamConfig:
         return DecodeOptions(self.min_contrast, self.min_bit_contrast, self.auto_bits)
 
 
-# --- triangulation ------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Observer:
-    """A camera or a projector placement that observes projector blocks."""
-
-    intrinsics: Intrinsics
-    pose: Pose
-    tolerance_px: float  # accepted reprojection error in this observer's pixels
-
-
-def triangulate(obs: np.ndarray, observers: list[Observer]) -> np.ndarray:
-    """Linear multi-view DLT, vectorised: pixels (N, V, 2) with NaN where unseen -> (N, 3).
-
-    Rows are built in undistorted normalised coordinates, so distortion is handled and the
-    system is well conditioned; unseen views contribute zero rows.
-    """
-    n, v, _ = obs.shape
-    A = np.zeros((n, 2 * v, 4))
-    for k, ob in enumerate(observers):
-        seen = ~np.isnan(obs[:, k, 0])
-        rays = ob.intrinsics.pixel_rays(obs[seen, k])
-        xy = rays[:, :2] / rays[:, 2:3]
-        P = np.hstack([ob.pose.R, ob.pose.t[:, None]])
-        A[seen, 2 * k] = xy[:, :1] * P[2] - P[0]
-        A[seen, 2 * k + 1] = xy[:, 1:2] * P[2] - P[1]
-    A /= np.linalg.norm(A, axis=2, keepdims=True).clip(1e-12)
-    _, _, vt = np.linalg.svd(A, full_matrices=False)
-    h = vt[:, -1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return h[:, :3] / h[:, 3:4]
-
-
-def check_points(
-    points: np.ndarray, obs: np.ndarray, observers: list[Observer], min_angle_deg: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Which points pass: in front of every observer, reprojection within each observer's
-    tolerance, largest pairwise ray angle >= ``min_angle_deg``; and the RMS error (px)."""
-    n = len(points)
-    ok = np.all(np.isfinite(points), axis=1)
-    sq = np.zeros(n)
-    count = np.zeros(n)
-    dirs = np.full((n, len(observers), 3), np.nan)
-    for k, ob in enumerate(observers):
-        seen = ~np.isnan(obs[:, k, 0])
-        depth = points @ ob.pose.R[2] + ob.pose.t[2]
-        ok &= ~seen | (depth > 0)
-        uv = project(ob.intrinsics, ob.pose, points)
-        err = np.linalg.norm(uv - obs[:, k], axis=1)
-        with np.errstate(invalid="ignore"):
-            ok &= ~seen | (err <= ob.tolerance_px)
-        sq[seen] += np.nan_to_num(err[seen]) ** 2
-        count[seen] += 1
-        d = ob.pose.center - points
-        dirs[seen, k] = d[seen] / np.linalg.norm(d[seen], axis=1, keepdims=True)
-    cos_min = np.ones(n)
-    for a in range(len(observers)):
-        for b in range(a + 1, len(observers)):
-            c = np.einsum("ij,ij->i", dirs[:, a], dirs[:, b])
-            cos_min = np.fmin(cos_min, c)
-    ok &= cos_min <= np.cos(np.radians(min_angle_deg))
-    return ok, np.sqrt(sq / np.maximum(count, 1))
-
-
-# --- correspondences ----------------------------------------------------------------------
-
-
-def block_centroids(
-    dec: GrayDecoding, merge: tuple[int, int] = (1, 1)
-) -> dict[str, np.ndarray]:
-    """Projector blocks seen by a view (``keys``) and the mean camera pixel (``xy``) and pixel
-    count (``counts``) of the pixels decoded to each.
-
-    ``merge`` coarsens the blocks (views of one placement may resolve different bit counts).
-    Keys are ``col * rows + row`` in the coarsened blocks; (x, y) in COLMAP pixel coordinates.
-    """
-    rows_, cols_ = np.nonzero(dec.valid)
-    col = dec.col[rows_, cols_] // merge[0]
-    row = dec.row[rows_, cols_] // merge[1]
-    n_rows = -(-dec.blocks[1] // merge[1])
-    key = col * n_rows + row
-    uniq, inv, counts = np.unique(key, return_inverse=True, return_counts=True)
-    x = np.bincount(inv, weights=cols_ + 0.5) / counts
-    y = np.bincount(inv, weights=rows_ + 0.5) / counts
-    return {"keys": uniq, "xy": np.stack([x, y], axis=1), "counts": counts}
-
-
-def _match(per_view: list[dict[str, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Union of block keys over views -> (keys (N,), pixels (N, V, 2) NaN where unseen)."""
-    keys = np.unique(np.concatenate([c["keys"] for c in per_view]))
-    obs = np.full((len(keys), len(per_view), 2), np.nan)
-    for k, c in enumerate(per_view):
-        obs[np.searchsorted(keys, c["keys"]), k] = c["xy"]
-    return keys, obs
-
-
 # --- frames -------------------------------------------------------------------------------
 
 
@@ -239,7 +146,7 @@ class FrameSource:
 def has_gray_code(session: Session) -> bool:
     """Whether a session carries structured-light frames (it then takes the projector path,
     and those frames are not illuminations for the optimiser)."""
-    return any(is_structured(r.illumination) and r.illumination not in ("white", "black")
+    return any(is_structured(r.illumination) and r.illumination not in REFERENCES
                for r in session.frames)
 
 
@@ -275,163 +182,10 @@ def placements(session: Session, conf: ProcamConfig, views: list[int]) -> dict[i
     return recorded
 
 
-# --- projector pose -----------------------------------------------------------------------
-
-
-def resect(points: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, Pose]:
-    """Camera matrix by normalised linear DLT from >= 6 non-coplanar points -> (K, pose)."""
-    def normaliser(p: np.ndarray) -> np.ndarray:
-        c = p.mean(axis=0)
-        s = np.sqrt(p.shape[1]) / np.linalg.norm(p - c, axis=1).mean()
-        T = np.eye(p.shape[1] + 1)
-        T[:-1, :-1] *= s
-        T[:-1, -1] = -s * c
-        return T
-
-    T3, T2 = normaliser(points), normaliser(xy)
-    X = (np.hstack([points, np.ones((len(points), 1))])) @ T3.T
-    x = (np.hstack([xy, np.ones((len(xy), 1))])) @ T2.T
-    zeros = np.zeros_like(X)
-    A = np.concatenate(
-        [
-            np.hstack([X, zeros, -x[:, :1] * X]),
-            np.hstack([zeros, X, -x[:, 1:2] * X]),
-        ]
-    )
-    P = np.linalg.solve(T2, np.linalg.svd(A, full_matrices=False)[2][-1].reshape(3, 4) @ T3)
-    if np.linalg.det(P[:, :3]) < 0:
-        P = -P
-    K, R = rq(P[:, :3])
-    D = np.diag(np.sign(np.diag(K)))
-    K, R = K @ D, D @ R
-    t = np.linalg.solve(K, P[:, 3])
-    return K / K[2, 2], Pose(R, t)
-
-
-def projector_pose(
-    points: np.ndarray, xy: np.ndarray, size: tuple[int, int], focal_px: float | None,
-    tolerance_px: float,
-) -> tuple[Intrinsics, Pose, int]:
-    """Projector intrinsics and pose from 3-D points and their projector pixels: resection for
-    an initial camera matrix, then ``cv2.solvePnPRansac`` with a square-pixel K (the given
-    focal, else the resected one) and the principal point at the image centre; an unknown
-    focal is finally refined jointly with the pose (``cv2.calibrateCamera``, one view of
-    non-coplanar points, everything but f and the pose held fixed)."""
-    if len(points) < 12:
-        raise RigError(
-            f"only {len(points)} triangulated points lit by one projector placement",
-            "let more of the object be lit from each placement, or take more views per placement",
-        )
-    known = focal_px is not None
-    if focal_px is None:
-        K0, _ = resect(points, xy)
-        focal_px = float(np.sqrt(abs(K0[0, 0] * K0[1, 1])))
-    intr = Intrinsics.pinhole(size[0], size[1], focal_px)
-    ok, rvec, tvec, inliers = cv2.solvePnPRansac(
-        points.astype(np.float64), xy.astype(np.float64), intr.K, None,
-        reprojectionError=tolerance_px, iterationsCount=200, flags=cv2.SOLVEPNP_EPNP,
-    )
-    if not ok or inliers is None:
-        raise RigError("the projector pose could not be estimated", "check the camera poses")
-    idx = inliers[:, 0]
-    obj, img = points[idx].astype(np.float32), xy[idx].astype(np.float32)
-    if not known:
-        flags = (
-            cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_PRINCIPAL_POINT
-            | cv2.CALIB_FIX_ASPECT_RATIO | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K1
-            | cv2.CALIB_FIX_K2 | cv2.CALIB_FIX_K3
-        )
-        _, K, _, rvecs, tvecs = cv2.calibrateCamera(
-            [obj], [img], size, intr.K.copy(), np.zeros(5), flags=flags
-        )
-        intr = Intrinsics.pinhole(size[0], size[1], float(K[0, 0]))
-        rvec, tvec = rvecs[0], tvecs[0]
-    rvec, tvec = cv2.solvePnPRefineLM(obj, img, intr.K, None, rvec, tvec)
-    return intr, Pose(cv2.Rodrigues(rvec)[0], np.asarray(tvec, float).ravel()), len(idx)
-
-
-def light_positions(
-    view_placement: Mapping[int, Any], placement_poses: Mapping[Any, Pose]
-) -> dict[int, np.ndarray]:
-    """Per-view light position (world, metres): the optical centre of the projector
-    placement that lit the view — the near point light of the optimiser's free-light mode."""
-    return {
-        v: placement_poses[p].center for v, p in view_placement.items() if p in placement_poses
-    }
-
-
 def read_light_positions(out_dir: Path) -> dict[int, np.ndarray]:
     """``lights.json`` written by :func:`procam_initial_mesh` -> view -> position."""
     data = json.loads((Path(out_dir) / LIGHTS).read_text())
     return {int(v): np.asarray(p, dtype=float) for v, p in data["positions"].items()}
-
-
-# --- cloud -> mesh ------------------------------------------------------------------------
-
-
-def oriented_normals(points: np.ndarray, towards: np.ndarray, k: int) -> np.ndarray:
-    """PCA normals over ``k`` neighbours, flipped to face ``towards`` (directions to cameras)."""
-    _, idx = cKDTree(points).query(points, k=min(k, len(points)))
-    nb = points[idx] - points[idx].mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", nb, nb)
-    normals = np.linalg.eigh(cov)[1][:, :, 0]
-    flip = np.einsum("ij,ij->i", normals, towards) < 0
-    normals[flip] *= -1
-    return normals
-
-
-def drop_outliers(points: np.ndarray, k: int = 8, factor: float = 3.0) -> np.ndarray:
-    """Mask of points whose k-th neighbour is within ``factor`` x the median such distance."""
-    d = cKDTree(points).query(points, k=min(k + 1, len(points)))[0][:, -1]
-    return np.asarray(d <= factor * np.median(d))
-
-
-def keep_large_pieces(mesh: trimesh.Trimesh, fraction: float) -> trimesh.Trimesh:
-    """Drop connected pieces with fewer than ``fraction`` of the faces (labels from
-    ``scipy.sparse.csgraph``: trimesh's ``split`` needs networkx, not a dependency)."""
-    n = len(mesh.vertices)
-    edges = mesh.edges_unique
-    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    _, labels = connected_components(graph, directed=False)
-    face_label = labels[mesh.faces[:, 0]]
-    counts = np.bincount(face_label)
-    keep = counts[face_label] >= fraction * len(mesh.faces)
-    out = mesh.submesh([np.nonzero(keep)[0]], append=True)
-    assert isinstance(out, trimesh.Trimesh)
-    return out
-
-
-def poisson_surface(
-    points: np.ndarray, normals: np.ndarray, depth: int, trim: float, num_threads: int
-) -> trimesh.Trimesh:
-    """Screened Poisson of the oriented cloud with ``pycolmap.poisson_meshing`` (CPU)."""
-    with tempfile.TemporaryDirectory() as tmp:
-        src, dst = Path(tmp) / "points.ply", Path(tmp) / "mesh.ply"
-        write_oriented_ply(src, points, normals)
-        options = pycolmap.PoissonMeshingOptions()
-        options.depth, options.trim = depth, trim
-        options.color, options.num_threads = False, num_threads
-        pycolmap.poisson_meshing(src, dst, options)
-        if not dst.is_file():
-            raise RigError("Poisson meshing produced no mesh", "check recon/procam/points.ply")
-        mesh = read_mesh(dst, process=True)
-    if len(mesh.faces) == 0:
-        raise RigError("Poisson meshing produced an empty mesh", "lower procam.poisson_trim")
-    return mesh
-
-
-def trim_to_cloud(mesh: trimesh.Trimesh, points: np.ndarray, factor: float) -> trimesh.Trimesh:
-    """Cut faces whose vertices all lie farther than ``factor`` point spacings from the cloud
-    (Poisson closes open scans with invented surface), then drop small leftover pieces."""
-    tree = cKDTree(points)
-    spacing = float(np.median(tree.query(points, k=2)[0][:, 1]))
-    far = tree.query(mesh.vertices)[0] > factor * spacing
-    keep = ~np.all(far[mesh.faces], axis=1)
-    if not keep.any():
-        raise RigError("trimming removed the whole mesh", "raise procam.trim_distance")
-    out = mesh.submesh([np.nonzero(keep)[0]], append=True)
-    assert isinstance(out, trimesh.Trimesh)
-    return keep_large_pieces(out, 0.05)
 
 
 # --- the stage ----------------------------------------------------------------------------
@@ -485,7 +239,7 @@ def _triangulate_group(
                                      step[1] // decoded[v].row_step))
         for v in views
     ]
-    keys, obs = _match(per_view)
+    keys, obs = match_blocks(per_view)
     observers = [
         Observer(_intrinsics_for(v, intrinsics, decoded[v].valid.shape), poses[v],
                  conf.max_reproj_px)
@@ -599,8 +353,8 @@ def _procam(
     points, towards = points[keep], towards[keep]
     normals = oriented_normals(points, towards, conf.normal_neighbours)
     write_oriented_ply(out_dir / POINTS, points, normals)
-    mesh = poisson_surface(points, normals, conf.poisson_depth, conf.poisson_trim,
-                           conf.num_threads)
+    mesh = poisson_mesh(points, normals, conf.poisson_depth, conf.poisson_trim,
+                        conf.num_threads, largest_only=False, trim_option="procam.poisson_trim")
     mesh = (
         trim_to_cloud(mesh, points, conf.trim_distance)
         if conf.trim_distance > 0

@@ -10,68 +10,24 @@ Bits finer than the camera can resolve (a projector pixel smaller than a camera 
 no contrast anywhere; with ``auto_bits`` decoding stops at the first such bit and the code
 addresses blocks of ``2**k`` projector pixels, which is what the camera actually resolves.
 
-Pattern ids (the manifest's ``illumination``): ``gray-<axis>-<bit:02d>`` and
-``gray-<axis>-<bit:02d>-inv`` with axis ``col``/``row`` (``drivers.projectors.patterns``) or
-``x``/``y``, bit 0 the most significant, optionally prefixed ``sl-``; ``white`` and ``black``
-are the optional flat references. The whole image stack is never held: frames are streamed bit by
-bit, so full-size RAW sequences fit in memory.
+Frame labels (the manifest's ``illumination``) are :mod:`core.labels`'s; the Gray-code bit math
+is :mod:`core.graycode`'s. The whole image stack is never held: frames are streamed bit by bit,
+so full-size RAW sequences fit in memory.
 """
 
 from __future__ import annotations
 
-import re
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from core.errors import RigError
-
-AXES = ("col", "row")
-_AXIS_ALIASES = {"col": "col", "x": "col", "row": "row", "y": "row"}
-_PATTERN = re.compile(r"^(?:sl-)?gray-(col|row|x|y)-(\d+)(-inv)?$")
-REFERENCES = ("white", "black")
+from core.graycode import bit_count, gray_decode
+from core.labels import AXES, parse_pattern_id, pattern_label
 
 # label -> (linear image (H, W) or (H, W, C), saturation mask (H, W) or None)
 Loader = Callable[[str], tuple[np.ndarray, np.ndarray | None]]
-
-
-@dataclass(frozen=True)
-class PatternId:
-    """One Gray-code frame: ``axis`` ``col`` or ``row``, ``bit`` (0 = MSB), ``inverse``."""
-
-    axis: str
-    bit: int
-    inverse: bool
-
-
-def parse_pattern_id(label: str) -> PatternId | None:
-    """The Gray-code pattern a manifest label names, or None for any other illumination."""
-    match = _PATTERN.match(label)
-    if match is None:
-        return None
-    axis, bit, inv = match.groups()
-    return PatternId(_AXIS_ALIASES[axis], int(bit), inv is not None)
-
-
-def is_structured(label: str) -> bool:
-    """Whether a frame belongs to the structured-light sequence (Gray code or flat reference)."""
-    return label.removeprefix("sl-") in REFERENCES or parse_pattern_id(label) is not None
-
-
-def bit_count(size: int) -> int:
-    """Bits of the Gray code that gives each of ``size`` columns (or rows) its own code."""
-    return max(1, int(np.ceil(np.log2(max(size, 1)))))
-
-
-def gray_to_binary(codes: np.ndarray) -> np.ndarray:
-    """Inverse of ``v ^ (v >> 1)``, vectorised (prefix XOR by doubling shifts)."""
-    out = codes.copy()
-    shift = 1
-    while shift < 64:
-        out ^= out >> shift
-        shift *= 2
-    return out
 
 
 @dataclass(frozen=True)
@@ -135,7 +91,7 @@ def sequence_labels(labels: Iterable[str]) -> dict[str, dict[int, dict[bool, str
                 f"capture the {axis} patterns (gray-{axis}-00, gray-{axis}-00-inv, ...)",
             )
         missing = [
-            f"gray-{axis}-{b:02d}" + ("-inv" if inv else "")
+            pattern_label(axis, b, inv)
             for b in range(max(bits) + 1)
             for inv in (False, True)
             if inv not in bits.get(b, {})
@@ -232,7 +188,7 @@ def decode_gray(
                 code = (code << 1) | (d > 0)
                 weakest = np.minimum(weakest, rel)
                 used[axis] += 1
-            codes[axis] = gray_to_binary(code)
+            codes[axis] = gray_decode(code)
     sat = np.zeros(swing.shape, bool) if saturated is None else saturated
     steps = {a: 2 ** (n_bits[a] - used[a]) for a in AXES}
     blocks = {a: -(-s // steps[a]) for a, s in zip(AXES, size, strict=True)}
@@ -249,15 +205,3 @@ def decode_gray(
     row = np.where(valid, codes["row"], -1)
     return GrayDecoding(col, row, valid, steps["col"], steps["row"], size, rejected)
 
-
-def decode_gray_arrays(
-    images: dict[str, np.ndarray],
-    projector_size: tuple[int, int] | None = None,
-    options: DecodeOptions | None = None,
-    saturated: dict[str, np.ndarray] | None = None,
-) -> GrayDecoding:
-    """:func:`decode_gray` for frames already in memory (label -> image)."""
-    masks = saturated or {}
-    return decode_gray(
-        images, lambda label: (images[label], masks.get(label)), projector_size, options
-    )

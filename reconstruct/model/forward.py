@@ -11,22 +11,23 @@ from __future__ import annotations
 
 import numpy as np
 
+from calibration.estimation import response_matrices
 from core.errors import RigError
 
 
 def response_matrix(camera_sensitivity: np.ndarray, spd: np.ndarray) -> np.ndarray:
-    """``C^T diag(L)``: camera sensitivity (N_λ, 3) and light SPD (N_λ,) -> (3, N_λ).
+    """``C^T diag(L)``: camera sensitivity (N_λ, 3) and light SPD (N_λ,) -> (3, N_λ), one
+    light of :func:`calibration.estimation.response_matrices`.
 
     Multiplying a reflectance (N_λ,) by it gives the RGB of a unit-shading, unshadowed point.
     """
-    C = np.asarray(camera_sensitivity, dtype=float)
     L = np.asarray(spd, dtype=float)
-    if C.ndim != 2 or C.shape[1] != 3 or L.shape != (C.shape[0],):
+    if L.ndim != 1:
         raise RigError(
-            f"camera sensitivity {C.shape} and SPD {L.shape} do not fit (N_λ, 3) and (N_λ,)",
-            "resample both onto the same spectral grid (calibration.spectra.resample)",
+            f"the light SPD has shape {L.shape}, expected one spectrum (N_λ,)",
+            "pass one light's SPD, or use calibration.estimation.response_matrices for several",
         )
-    return C.T * L[None, :]
+    return response_matrices(camera_sensitivity, L[None, :])[0]
 
 
 def shading(points: np.ndarray, normals: np.ndarray, light_positions: np.ndarray) -> np.ndarray:

@@ -21,6 +21,7 @@ from rich import get_console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from core.errors import RigError
+from core.labels import is_structured
 from core.session import RECON_DIR, Session
 from reconstruct.frames import decode
 from reconstruct.frames.decode import DecodeConfig, DecodedFrame, DecodeIndex
@@ -37,7 +38,6 @@ from reconstruct.initial_mesh.procam import (
     read_light_positions,
 )
 from reconstruct.initial_mesh.stage import MeshConfig, mesh_config
-from reconstruct.initial_mesh.structured_light import is_structured
 from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.poses import stage as poses
 from reconstruct.poses.stage import PosesConfig, PoseSummary

@@ -29,9 +29,10 @@ from calibration.basis import SpectralBasis, default_basis
 from calibration.grid import DEFAULT_GRID
 from calibration.store import CalibrationStore
 from core.errors import RigError
+from core.labels import AMBIENT
 from core.session import RECON_DIR, Session
 from core.yamlio import read_yaml
-from reconstruct.frames.ambient import AMBIENT, exposure_ratio, subtract_ambient
+from reconstruct.frames.ambient import exposure_ratio, subtract_ambient
 from reconstruct.frames.decode import FLOAT16_RANGE, load_frame
 from reconstruct.model.camera import Intrinsics
 from reconstruct.model.forward import response_matrix

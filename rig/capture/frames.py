@@ -52,8 +52,8 @@ class RawData:
 
 
 def read_raw(path: Path) -> RawData:
-    """Decode a frame file: RAW via LibRaw (rawpy), linear TIFF via tifffile, NumPy arrays.
-    Raises RigError naming the file when it does not decode."""
+    """Decode a frame file: RAW via :mod:`reconstruct.frames.raw`, linear TIFF via tifffile,
+    NumPy arrays. Raises RigError naming the file when it does not decode."""
     suffix = path.suffix.lower()
     try:
         if suffix in TIFF_SUFFIXES:
@@ -64,22 +64,13 @@ def read_raw(path: Path) -> RawData:
         if suffix in NPY_SUFFIXES:
             values = np.load(path, allow_pickle=False)
             return RawData(values, 0.0, _full_scale(values))
-        import rawpy
+        from reconstruct.frames.raw import read_mosaic
 
-        with rawpy.imread(str(path)) as raw:
-            values = raw.raw_image_visible.copy()
-            black = float(np.mean(raw.black_level_per_channel))
-            white = float(raw.white_level)
-            pattern = raw.raw_pattern  # None for sensors without a colour-filter mosaic
-            cfa: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
-            if pattern is not None and values.ndim == 2:
-                cfa = _cfa_levels(
-                    np.asarray(pattern, dtype=np.intp),
-                    np.asarray(raw.black_level_per_channel, dtype=float),
-                    np.asarray(raw.camera_whitebalance, dtype=float),
-                    white,
-                )
-        return RawData(values, black, white, *cfa)
+        mosaic = read_mosaic(path)
+        cfa: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
+        if mosaic.pattern is not None and mosaic.values.ndim == 2:
+            cfa = _cfa_levels(mosaic.pattern, mosaic.channel_black, mosaic.camera_wb, mosaic.white)
+        return RawData(mosaic.values, mosaic.mean_black, mosaic.white, *cfa)
     except RigError:
         raise
     except Exception as exc:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from fakes import fake_profile
 
+from core.labels import structured_light_labels
 from rig.plans import (
     MoveTo,
     SetLight,
@@ -12,7 +13,6 @@ from rig.plans import (
     Trigger,
     capture_plan,
     frame_list,
-    gray_code_patterns,
     pattern_image,
 )
 from rig.profile import parse_profile
@@ -45,7 +45,7 @@ def test_capture_plan_skips_done_frames_and_finished_views() -> None:
 
 def test_gray_code_patterns_decode_every_column_and_row() -> None:
     width, height = 40, 24
-    ids = gray_code_patterns(width, height)
+    ids = structured_light_labels(width, height)
     assert ids[:2] == ["white", "black"]
     for axis, size in (("col", width), ("row", height)):
         bits = [i for i in ids if i.startswith(f"gray-{axis}-") and not i.endswith("-inv")]
@@ -74,7 +74,7 @@ def test_projector_plan_shows_patterns_after_colours() -> None:
     }
     plan = parse_profile(data, "p.yaml").plan
     frames = frame_list(plan, (16, 8))
-    per_view = 2 + len(gray_code_patterns(16, 8))
+    per_view = 2 + len(structured_light_labels(16, 8))
     assert len(frames) == 2 * per_view
     msgs = list(capture_plan(frames, set(), 2))
     shows = [m.pattern for m in msgs if isinstance(m, ShowPattern)]

@@ -1,4 +1,5 @@
-"""Gray-code patterns (pure functions) and the pygame projector on SDL's dummy video driver."""
+"""Gray-code patterns (pure functions), decoded by the reconstruction's decoder, and the
+pygame projector on SDL's dummy video driver."""
 
 from __future__ import annotations
 
@@ -6,22 +7,9 @@ import numpy as np
 import pytest
 
 from core.errors import RigError
-from drivers.projectors.patterns import (
-    bit_count,
-    decode_gray_code,
-    gray_code_image,
-    gray_code_sequence,
-    gray_decode,
-    gray_encode,
-    uniform_image,
-)
-
-
-def test_gray_codes_differ_by_one_bit_between_neighbours() -> None:
-    codes = gray_encode(np.arange(1024))
-    flips = codes[1:] ^ codes[:-1]
-    assert np.all((flips & (flips - 1)) == 0) and np.all(flips > 0)
-    assert np.array_equal(gray_decode(codes), np.arange(1024))
+from core.graycode import bit_count
+from drivers.projectors.patterns import gray_code_image, gray_code_sequence, uniform_image
+from reconstruct.initial_mesh.structured_light import decode_gray
 
 
 @pytest.mark.parametrize(("width", "height"), [(1, 1), (7, 3), (64, 48), (100, 37)])
@@ -50,10 +38,10 @@ def test_decoding_the_captured_sequence_recovers_every_projector_pixel() -> None
         name: albedo * image / 255.0 + 0.05 + rng.normal(0, 0.01, image.shape)
         for name, image in gray_code_sequence(width, height)
     }
-    cols, rows, valid = decode_gray_code(captures, width, height, min_contrast=0.05)
-    assert valid.all()
-    assert np.array_equal(cols, np.broadcast_to(np.arange(width), (height, width)))
-    assert np.array_equal(rows, np.broadcast_to(np.arange(height)[:, None], (height, width)))
+    dec = decode_gray(captures, lambda label: (captures[label], None), (width, height))
+    assert dec.valid.all() and (dec.col_step, dec.row_step) == (1, 1)
+    assert np.array_equal(dec.col, np.broadcast_to(np.arange(width), (height, width)))
+    assert np.array_equal(dec.row, np.broadcast_to(np.arange(height)[:, None], (height, width)))
 
 
 def test_uniform_image() -> None:

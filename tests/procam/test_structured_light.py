@@ -6,16 +6,23 @@ import numpy as np
 import pytest
 
 from core.errors import RigError
-from reconstruct.initial_mesh.structured_light import (
-    DecodeOptions,
-    decode_gray_arrays,
-    gray_to_binary,
-    is_structured,
-    parse_pattern_id,
-)
+from reconstruct.initial_mesh.structured_light import DecodeOptions, GrayDecoding, decode_gray
 from tests.procam.synth import capture_stack
 
 PROJ = (64, 48)
+
+
+def decode_images(
+    images: dict[str, np.ndarray],
+    projector_size: tuple[int, int],
+    options: DecodeOptions | None = None,
+    saturated: dict[str, np.ndarray] | None = None,
+) -> GrayDecoding:
+    """The stage's decoder over frames held in memory (label -> image)."""
+    masks = saturated or {}
+    return decode_gray(
+        images, lambda label: (images[label], masks.get(label)), projector_size, options
+    )
 
 
 def _score(dec, truth: np.ndarray, truly_lit: np.ndarray) -> tuple[float, float]:
@@ -27,25 +34,11 @@ def _score(dec, truth: np.ndarray, truly_lit: np.ndarray) -> tuple[float, float]
     return float(exact[valid].mean()), float(valid.sum() / truly_lit.sum())
 
 
-def test_parse_both_id_spellings() -> None:
-    assert parse_pattern_id("gray-col-03-inv") == parse_pattern_id("gray-x-03-inv")
-    assert parse_pattern_id("sl-gray-col-03-inv") == parse_pattern_id("gray-col-03-inv")
-    pid = parse_pattern_id("gray-y-10")
-    assert pid is not None and (pid.axis, pid.bit, pid.inverse) == ("row", 10, False)
-    assert parse_pattern_id("LED1") is None and parse_pattern_id("gray-z-01") is None
-    assert is_structured("white") and is_structured("sl-black") and not is_structured("red")
-
-
-def test_gray_to_binary_inverts_gray_encoding() -> None:
-    values = np.arange(1 << 12, dtype=np.int64)
-    assert np.array_equal(gray_to_binary(values ^ (values >> 1)), values)
-
-
 @pytest.mark.parametrize("seed,curved,colour", [(0, False, False), (1, True, True),
                                                  (2, True, True)])
 def test_decoding_recovers_projector_pixels(seed: int, curved: bool, colour: bool) -> None:
     images, truth, truly_lit = capture_stack(seed, proj=PROJ, curved=curved, colour=colour)
-    dec = decode_gray_arrays(images, PROJ)
+    dec = decode_images(images, PROJ)
     assert (dec.col_step, dec.row_step) == (1, 1)  # every bit resolved at ~2 px per stripe
     exact, coverage = _score(dec, truth, truly_lit)
     assert exact >= 0.99
@@ -60,7 +53,7 @@ def test_shadow_and_saturation_are_rejected() -> None:
     hot = np.zeros(truth.shape[:2], bool)
     hot[10:20, 60:80] = True
     sat["gray-col-02"] = sat["gray-col-02"] | hot
-    dec = decode_gray_arrays(images, PROJ, saturated=sat)
+    dec = decode_images(images, PROJ, saturated=sat)
     assert not dec.valid[hot].any()
     assert dec.rejected["saturated"] >= hot.sum() - 5
     shadow = ~truly_lit
@@ -71,11 +64,11 @@ def test_shadow_and_saturation_are_rejected() -> None:
 def test_unresolvable_fine_bits_are_dropped() -> None:
     # projector pixels 4x smaller than camera pixels: the finest two bits blur to grey
     images, truth, truly_lit = capture_stack(4, proj=(256, 192), blur=1.0)
-    dec = decode_gray_arrays(images, (256, 192))
+    dec = decode_images(images, (256, 192))
     assert dec.col_step >= 2 and dec.row_step >= 2
     exact, coverage = _score(dec, truth, truly_lit)
     assert exact >= 0.99 and coverage >= 0.5
-    strict = decode_gray_arrays(images, (256, 192), DecodeOptions(auto_bits=False))
+    strict = decode_images(images, (256, 192), DecodeOptions(auto_bits=False))
     assert strict.valid.sum() < dec.valid.sum()
 
 
@@ -83,4 +76,4 @@ def test_incomplete_sequence_names_the_missing_frame() -> None:
     images, _, _ = capture_stack(5, proj=PROJ)
     del images["gray-row-02-inv"]
     with pytest.raises(RigError, match="gray-row-02-inv"):
-        decode_gray_arrays(images, PROJ)
+        decode_images(images, PROJ)

@@ -5,15 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reconstruct.initial_mesh.procam import (
-    Observer,
-    check_points,
-    light_positions,
-    oriented_normals,
-    projector_pose,
-    resect,
-    triangulate,
-)
+from reconstruct.initial_mesh.point_cloud import oriented_normals
+from reconstruct.initial_mesh.projector_pose import light_positions, projector_pose, resect
+from reconstruct.initial_mesh.triangulation import Observer, check_points, triangulate
 from reconstruct.model.camera import Intrinsics, Pose, project
 
 RADIUS = 0.07
@@ -102,8 +96,8 @@ def test_normals_face_the_cameras() -> None:
 
 
 def test_block_centroids_merge_finer_codes() -> None:
-    from reconstruct.initial_mesh.procam import block_centroids
     from reconstruct.initial_mesh.structured_light import GrayDecoding
+    from reconstruct.initial_mesh.triangulation import block_centroids
 
     col = np.array([[0, 1, 2, 3], [0, 1, 2, 3]])
     row = np.array([[0, 0, 1, 1], [1, 1, 0, 0]])

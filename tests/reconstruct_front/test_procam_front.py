@@ -11,9 +11,9 @@ import pytest
 import trimesh
 
 from core.errors import RigError
+from core.labels import is_structured
 from reconstruct.initial_mesh.dense.poisson import read_mesh
 from reconstruct.initial_mesh.procam import ProcamConfig
-from reconstruct.initial_mesh.structured_light import is_structured
 from reconstruct.model.camera import write_colmap_text
 from reconstruct.run.front import FrontConfig, run_front
 from tests.procam import sim_session

@@ -11,7 +11,7 @@ import tifffile
 
 from core.errors import RigError
 from drivers.sim.dng import write_dng
-from reconstruct.frames.decode import postprocess_linear
+from reconstruct.frames.raw import postprocess_linear
 
 BLACK, WHITE = 512, 16383
 

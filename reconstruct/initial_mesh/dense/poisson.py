@@ -1,4 +1,5 @@
-"""Oriented points -> watertight mesh with pycolmap's Poisson reconstruction (CPU).
+"""Oriented points -> watertight mesh with pycolmap's Poisson reconstruction (CPU): the one
+Poisson of the initial-mesh methods (dense multi-view stereo and the projector's Gray code).
 
 ``pycolmap.poisson_meshing(input_path, output_path, options)`` reads a PLY point cloud with
 ``nx ny nz`` normals and writes a mesh PLY; ``options.trim`` removes low-density parts.
@@ -40,9 +41,18 @@ def write_oriented_ply(path: Path, points: np.ndarray, normals: np.ndarray) -> N
 
 
 def poisson_mesh(
-    points: np.ndarray, normals: np.ndarray, depth: int, trim: float, num_threads: int = -1
+    points: np.ndarray,
+    normals: np.ndarray,
+    depth: int,
+    trim: float,
+    num_threads: int = -1,
+    *,
+    largest_only: bool = True,
+    trim_option: str = "mesh.poisson_trim (mesh.patchmatch.poisson_trim with method patchmatch)",
 ) -> trimesh.Trimesh:
-    """Screened Poisson surface of oriented points; the largest connected piece is kept."""
+    """Screened Poisson surface of oriented points: octree ``depth``, density ``trim``; with
+    ``largest_only`` only the largest connected piece is kept. ``trim_option`` names the
+    setting that ``trim`` came from, for the hint when nothing is left."""
     if len(points) < 4:  # pycolmap's trimmer dies on an empty octree instead of raising
         raise RigError(
             f"Poisson meshing was given {len(points)} points",
@@ -59,14 +69,11 @@ def poisson_mesh(
         with quiet_colmap():
             pycolmap.poisson_meshing(src, dst, options)
         if not dst.is_file():
-            raise RigError("Poisson meshing produced no mesh", "check the dense point cloud")
+            raise RigError("Poisson meshing produced no mesh", "check the point cloud")
         mesh = read_mesh(dst, process=True)
     if len(mesh.faces) == 0:
-        raise RigError(
-            "Poisson meshing produced an empty mesh",
-            "lower mesh.poisson_trim (mesh.patchmatch.poisson_trim with method patchmatch)",
-        )
-    return largest_component(mesh)
+        raise RigError("Poisson meshing produced an empty mesh", f"lower {trim_option}")
+    return largest_component(mesh) if largest_only else mesh
 
 
 def largest_component(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
