@@ -1,5 +1,5 @@
-"""Decode: the real Canon DNG to normalised linear camera RGB, saturation masks, linear NPY
-frames, bad frames reported by name (skip or stop)."""
+"""Decode: the one RAW reader and its users on the real Canon DNG, normalised linear camera
+RGB, saturation masks, linear NPY frames, bad frames reported by name (skip or stop)."""
 
 from __future__ import annotations
 
@@ -15,6 +15,9 @@ from core.errors import RigError
 from core.session import FrameRecord, append_manifest, sha256_file
 from reconstruct.frames import decode
 from reconstruct.frames.decode import DecodeConfig, DecodeIndex, decode_raw, load_frame
+from reconstruct.frames.raw import read_linear_rgb, read_mosaic
+from rig.capture.frames import read_raw
+from rig.wizard import region_rgb
 
 BLACK, WHITE = 2056, 15000
 
@@ -32,6 +35,38 @@ def test_real_dng_is_normalised_linear_camera_rgb(shared_data: Path) -> None:
         # at a site of its own colour the demosaiced value is the sample itself
         np.testing.assert_allclose(rgb[..., channel][sites], expected[sites], atol=2e-4)
     assert not mask.any()  # the chart was exposed below the white level (max 12128)
+
+
+def test_raw_reader_gives_the_mosaic_and_its_levels(shared_data: Path) -> None:
+    path = shared_data / "raw" / "colorchart.dng"
+    mosaic = read_mosaic(path)
+    with rawpy.imread(str(path)) as raw:
+        values = raw.raw_image_visible.copy()
+    assert np.array_equal(mosaic.values, values) and mosaic.values.dtype == np.uint16
+    assert mosaic.colour_desc == "RGBG" and mosaic.colours.shape == values.shape
+    assert mosaic.white == WHITE and np.all(mosaic.channel_black == BLACK)
+    assert mosaic.pattern is not None and mosaic.pattern.shape == (2, 2)
+    levels = mosaic.levels()
+    np.testing.assert_allclose(levels, (values.astype(float) - BLACK) / (WHITE - BLACK), atol=1e-6)
+    assert np.array_equal(mosaic.clipped(0.7), levels >= np.float32(0.7))
+    same, rgb = read_linear_rgb(path, "linear")
+    assert np.array_equal(same.values, values) and rgb.shape == (*values.shape, 3)
+
+
+def test_capture_and_wizard_read_raw_through_the_one_reader(shared_data: Path) -> None:
+    path = shared_data / "raw" / "colorchart.dng"
+    mosaic = read_mosaic(path)
+    data = read_raw(path)
+    assert np.array_equal(data.values, mosaic.values)
+    assert (data.black, data.white, data.period) == (BLACK, WHITE, 2)
+    assert data.cfa_black is not None and np.all(data.cfa_black == BLACK)
+    region = (100, 200, 140, 260)
+    rgb, saturated = region_rgb(path, region)
+    window = (slice(200, 260), slice(100, 140))
+    level = (mosaic.values[window].astype(float) - BLACK) / (WHITE - BLACK)
+    letters = np.array(list("RGBG"))[mosaic.colours[window]]
+    np.testing.assert_allclose(rgb, [level[letters == c].mean() for c in "RGB"])
+    assert not saturated
 
 
 def test_saturation_mask_covers_clipped_neighbourhoods(shared_data: Path) -> None:
