@@ -43,7 +43,7 @@ def test_capture_plan_skips_done_frames_and_finished_views() -> None:
     assert isinstance(msgs[1], SetLight) and msgs[1].illumination == "B"
 
 
-def test_gray_code_patterns_decode_every_column_and_row() -> None:
+def test_structured_light_labels_decode_every_column_and_row() -> None:
     width, height = 40, 24
     ids = structured_light_labels(width, height)
     assert ids[:2] == ["white", "black"]
