@@ -1,9 +1,15 @@
-"""Small synthetic scenes shared by the optimiser tests (built once per session)."""
+"""Fixtures shared by the reconstruct tests: small synthetic optimiser scenes (built once per
+session) and ``make_session`` for the front stages (helpers in front_synthetic.py)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from functools import partial
+from pathlib import Path
+
 import numpy as np
 import pytest
+from front_synthetic import build_session
 
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.problem import Problem
@@ -44,3 +50,9 @@ def cost_at(
 ) -> tuple[JointCost, np.ndarray]:
     problem, theta = problem_at(scene, images, mode)
     return JointCost(problem), theta
+
+
+@pytest.fixture
+def make_session(tmp_path: Path) -> Callable[..., Path]:
+    """``make_session(views=..., illuminations=..., known_poses=..., size=...)`` -> session."""
+    return partial(build_session, tmp_path)

@@ -407,7 +407,7 @@ def test_a_corrupt_raw_frame_is_skipped_with_a_non_zero_exit(
     exits 3; with `stop` the run refuses with one error line naming it."""
     import sys
 
-    sys.path.insert(0, str(Path(__file__).parent / "recon_safety"))
+    sys.path.insert(0, str(Path(__file__).parents[1] / "reconstruct" / "run"))
     from recon_tiny import make_session, reconstruct_args
 
     session, conf = make_session(tmp_path)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from rig.cli import build_parser
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("calibration", "drivers", "reconstruct", "rig")
 COMMAND = re.compile(r"`rig ([a-z][a-z-]*)(?: ([a-z][a-z-]*))?")
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rawpy
+from test_dng import decode
 
 from calibration.defaults import colorchecker_reflectances
 from core.errors import RigError
@@ -16,8 +17,6 @@ from drivers.sim.light import SimLight
 from drivers.sim.scene import Scene, make_scene
 from reconstruct.model import forward
 from reconstruct.model.camera import Pose
-
-from .test_dng import decode
 
 HEIGHT_M = 0.4
 SENSOR = SensorConfig(width=160, height=120, focal_px=400.0)
@@ -120,7 +119,7 @@ def test_same_seed_same_bytes(chart: Scene, tmp_path: Path) -> None:
 
 
 def test_shadow_where_light_is_occluded(tmp_path: Path) -> None:
-    from tests.test_forward import plane
+    from tests.reconstruct.model.test_forward import plane
 
     ground, gf = plane(0.3, 0.0, n=8)
     block, bf = plane(0.04, 0.08)

@@ -16,7 +16,7 @@ from reconstruct.initial_mesh.procam import ProcamConfig
 from reconstruct.initial_mesh.structured_light import is_structured
 from reconstruct.model.camera import write_colmap_text
 from reconstruct.run.front import FrontConfig, run_front
-from tests.procam import sim_session
+from tests.reconstruct.initial_mesh import sim_session
 
 
 @pytest.mark.slow

@@ -22,7 +22,7 @@ from reconstruct.initial_mesh.procam import (
 )
 from reconstruct.model.camera import read_colmap_text
 from reconstruct.run.stages import STAMP
-from tests.procam import sim_session
+from tests.reconstruct.initial_mesh import sim_session
 
 
 def _mean_distance_mm(mesh_path: Path, rig) -> tuple[float, int]:

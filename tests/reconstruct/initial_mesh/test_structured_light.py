@@ -13,7 +13,7 @@ from reconstruct.initial_mesh.structured_light import (
     is_structured,
     parse_pattern_id,
 )
-from tests.procam.synth import capture_stack
+from tests.reconstruct.initial_mesh.synth import capture_stack
 
 PROJ = (64, 48)
 

@@ -13,7 +13,7 @@ from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.solver import ArrowheadPreconditioner
 from reconstruct.optimise.synthetic import SyntheticScene
-from tests.optimise.conftest import cost_at, problem_at
+from tests.reconstruct.conftest import cost_at, problem_at
 
 
 def test_rendering_residual_is_zero_at_the_truth(scene: SyntheticScene) -> None:

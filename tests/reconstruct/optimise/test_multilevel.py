@@ -23,7 +23,7 @@ from reconstruct.optimise.solver import (
 )
 from reconstruct.optimise.steps import OptimiseSettings, build_problem
 from reconstruct.optimise.synthetic import SyntheticScene, make_scene, perturb
-from tests.optimise.conftest import cost_at
+from tests.reconstruct.conftest import cost_at
 
 
 def _projection(p: Problem, mask: np.ndarray, directions: np.ndarray | None) -> sp.csr_array:

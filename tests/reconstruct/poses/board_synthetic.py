@@ -1,5 +1,5 @@
 """Sessions of a printed ChArUco board seen from around an object (synthetic renders of
-``tests/board/conftest.py``), written as linear NPY frames with a manifest and a
+``tests/reconstruct/poses/conftest.py``), written as linear NPY frames with a manifest and a
 ``board:`` entry in session.yaml, as ``rig capture`` leaves them; plus a stand-in for SfM
 that returns the true poses in another (scaled, rotated, shifted) frame."""
 
@@ -16,7 +16,7 @@ from core.session import FrameRecord, append_manifest, sha256_file
 from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.poses.board import BoardSpec, Similarity, board_texture
 from reconstruct.poses.stage import SfmResult, rescale
-from tests.board.conftest import PX_PER_M, Scene, orbit_poses, render
+from tests.reconstruct.poses.conftest import PX_PER_M, Scene, orbit_poses, render
 
 SPEC = BoardSpec.fit_paper("A4")
 INTRINSICS = Intrinsics("PINHOLE", 960, 720, (830.0, 830.0, 482.5, 356.0))

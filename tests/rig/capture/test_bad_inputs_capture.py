@@ -1,7 +1,7 @@
 """Bad inputs of the capture side (manifest, session.yaml, calibration store, device
 transports) through `rig` itself: each gives a non-zero exit and one message naming the file,
 line, key or device — never "internal error". The rest of the issue-17 table (profiles, CLI
-arguments, reconstruction) is tests/test_bad_inputs.py."""
+arguments, reconstruction) is tests/rig/test_bad_inputs.py."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from rig.capture import run_capture
 from rig.cli import main
 
 pytest.importorskip("drivers.sim")
-ROOT = Path(__file__).parents[2]
+ROOT = Path(__file__).parents[3]
 Prepare = Callable[[Path, Path], list[str]]  # (copy of the base session, tmp dir) -> argv
 
 

@@ -18,7 +18,7 @@ from rig.capture.trust import confirm_session_devices, session_programs
 from rig.cli import main
 from rig.profile import parse_profile
 
-ROOT = Path(__file__).parents[2]
+ROOT = Path(__file__).parents[3]
 
 
 def make_store(root: Path) -> Path:
@@ -69,7 +69,7 @@ def test_capture_with_such_a_store_writes_nothing_outside_the_session(
     pytest.importorskip("drivers.sim")
     store = make_store(tmp_path / "store")
     point_entry_at(store, "../victim.csv")
-    profile = yaml.safe_load((ROOT / "tests/capture/sim-small.yaml").read_text())
+    profile = yaml.safe_load((ROOT / "tests/rig/sim-small.yaml").read_text())
     profile["calibration"] = {"store": str(store), "camera": "x", "lights": {"LED1": "LED1"}}
     path = tmp_path / "p.yaml"
     path.write_text(yaml.safe_dump(profile))
@@ -116,7 +116,7 @@ def test_resume_refuses_a_session_whose_snapshot_runs_a_program(
     """A foreign session's session.yaml names a program: --yes alone never runs it."""
     pytest.importorskip("drivers.sim")
     marker = tmp_path / "ran"
-    profile = yaml.safe_load((ROOT / "tests/capture/sim-small.yaml").read_text())
+    profile = yaml.safe_load((ROOT / "tests/rig/sim-small.yaml").read_text())
     profile["plan"]["views"] = 1
     light = [sys.executable, "-m", "drivers.lights.rgbcw_emulator"]
     profile["devices"]["light"] = {

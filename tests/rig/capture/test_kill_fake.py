@@ -16,13 +16,13 @@ import pytest
 
 from core.session import read_manifest, verify_frames
 
-SCRIPT = Path(__file__).with_name("fakes.py")
+SCRIPT = Path(__file__).parents[1] / "fakes.py"
 FRAMES = 6 * 4
 
 
 def start(session: Path, resume: bool) -> subprocess.Popen[bytes]:
     args = [sys.executable, str(SCRIPT), str(session)] + (["--resume"] if resume else [])
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[2])}
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[3])}
     return subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
 
 
