@@ -93,6 +93,7 @@ def test_the_stamp_sits_in_numbas_cache_folder(tmp_path: Path):
     assert Path(out.stdout.strip()).parent.parent == tmp_path
 
 
+@pytest.mark.slow
 def test_the_child_fills_an_empty_numba_cache(tmp_path: Path):
     """The child reconstructs its tiny capture and leaves the dense path's and the optimiser's
     kernels cached (the folder numba would otherwise fill during the user's run)."""

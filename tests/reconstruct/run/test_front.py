@@ -77,6 +77,7 @@ def test_config_errors(tmp_path: Path) -> None:
         load_user_mesh(tmp_path / "nope.ply")
 
 
+@pytest.mark.slow
 def test_patchmatch_recovers_a_concavity_the_hull_cannot(tmp_path: Path) -> None:
     truth = dented_sphere(depth=0.02)
     root = build_session(tmp_path, views=12, illuminations=("white",), size=(200, 150),

@@ -27,6 +27,7 @@ def test_a_reset_forgets_an_earlier_peak() -> None:
     assert peak_rss_mb() < grown - 250
 
 
+@pytest.mark.slow
 def test_the_report_has_each_stages_peak(tmp_path: Path) -> None:
     session, config = make_session(tmp_path)
     assert main(reconstruct_args(session, config)) == 0

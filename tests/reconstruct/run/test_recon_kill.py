@@ -128,6 +128,7 @@ def test_twenty_sigkills_never_mix_outputs_and_resume_to_the_same_result(
     assert untimed[0] == untimed[1]  # the same iterations with the same costs
 
 
+@pytest.mark.slow
 def test_sigterm_exits_143_without_a_stack_dump_and_resumes(tmp_path: Path) -> None:
     """pycolmap's glog prints a native stack dump on SIGTERM; the CLI handles it like Ctrl-C."""
     session, config = make_session(tmp_path)

@@ -64,6 +64,7 @@ def similarity(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.
     return scale, rot, mu_d - scale * rot @ mu_s
 
 
+@pytest.mark.slow
 def test_sim_known_poses(tmp_path: Path) -> None:
     config = {"views": 16, "subdivisions": 6,
               "camera": {"width": 256, "height": 192, "focal_px": 320.0, "supersample": 1}}

@@ -22,6 +22,7 @@ def read_summary(path: Path) -> dict[str, dict[str, str]]:
         return {Path(row["session"]).name: row for row in csv.DictReader(f)}
 
 
+@pytest.mark.slow
 def test_batch_isolates_a_broken_session_and_skips_done_ones(
     template: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:
@@ -78,6 +79,7 @@ def test_bad_arguments_are_one_line_errors(tmp_path: Path) -> None:
     assert main(["batch", str(tmp_path), "--summary", str(tmp_path)]) == 2  # a folder: at once
 
 
+@pytest.mark.slow
 def test_a_session_with_an_unusable_frame_is_incomplete_not_done(
     template: Path, tmp_path: Path
 ) -> None:

@@ -18,6 +18,7 @@ from rig.cli import main
 GLOG = re.compile(r"^[IWEF]\d{8} \d\d:\d\d:\d\d", re.MULTILINE)  # glog's line prefix
 
 
+@pytest.mark.slow
 def test_reconstruct_is_quiet_by_default(
     template: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:

@@ -50,6 +50,7 @@ def wait_at_most(session: Path, frames: int, seconds: float, proc: multiprocessi
         time.sleep(0.002)
 
 
+@pytest.mark.slow
 def test_twenty_sigkills_lose_nothing_and_never_mix_frames(tmp_path: Path) -> None:
     profile = yaml.safe_load(PROFILE.read_text())
     profile["plan"]["views"] = VIEWS
