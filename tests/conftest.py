@@ -10,7 +10,8 @@ import pytest
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 os.environ.setdefault("MPLBACKEND", "Agg")
 # `rig reconstruct` and friends compile the numba kernels in a child process on a cold cache
-# (rig/warmup.py); the suite compiles in-process instead, and tests/test_warmup.py tests the step.
+# (rig/warmup.py); the suite compiles in-process instead, and tests/rig/test_warmup.py tests
+# the step.
 os.environ.setdefault("SPECTRAL_RIG_WARMUP", "0")
 
 REPO = Path(__file__).resolve().parents[1]
