@@ -126,8 +126,13 @@ def _sim(kind: str) -> Factory:
     """The ``kind`` of the set's simulated rig (one world per device set)."""
 
     def make(driver: str, options: dict[str, Any], devices: DeviceSet) -> Any:
-        from drivers.sim.world import shared_rig
-
+        try:
+            from drivers.sim.world import shared_rig
+        except ImportError as exc:
+            raise RigError(
+                "the simulated rig (drivers.sim) is not available",
+                f"install spectral-rig completely ({exc})",
+            ) from exc
         return getattr(shared_rig(devices), kind)
 
     return make

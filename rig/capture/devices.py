@@ -24,6 +24,7 @@ from drivers.protocols import (
 from rig.profile import Profile
 
 Ask = Callable[[str], str]
+KINDS = ("camera", "light", "projector", "spectrometer")
 
 
 @dataclass
@@ -62,12 +63,13 @@ class RigDevices:
         """A self-positioning rig moves itself; a real rig is moved by the person."""
         positioner = self.positioner
         if positioner is not None:
-            with device_errors("rig", "positioner", f"move to view {view}"):
+            kind = next(k for k in KINDS if getattr(self, k) is positioner)
+            with device_errors(kind, self.names.get(kind, "?"), f"move to view {view}"):
                 positioner.goto_view(view)
 
     def describe(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
-        for kind in ("camera", "light", "projector", "spectrometer"):
+        for kind in KINDS:
             device = getattr(self, kind)
             if device is not None:
                 with device_errors(kind, self.names.get(kind, "?"), "describe"):
