@@ -186,7 +186,7 @@ def build_session(
 
     def open_rig(prof: Any, seed: int, ask: Any) -> Any:
         devices = open_devices(prof, seed, ask)
-        sim = devices.sim
+        sim = getattr(devices.camera, "rig", None)  # the simulated rig the sim camera is part of
         if sim is None:
             raise RigError(f"{profile}: the external camera needs the sim rig (driver: sim)")
         renderer = ShadingRenderer(

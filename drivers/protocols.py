@@ -7,7 +7,7 @@ rig implements the same ones.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
@@ -91,3 +91,56 @@ class Spectrometer(Device, Protocol):
     def measure(self) -> Spectrum:
         """One (averaged, dark-subtracted if a dark was taken) spectrum."""
         ...
+
+
+# Optional capabilities (python-seabreeze's habit: a feature is a type a device may implement);
+# plans test for them with ``isinstance``, never by a driver's name.
+
+
+@runtime_checkable
+class SelfPositioning(Protocol):
+    """A device set that moves its own camera to each planned view (no person is asked)."""
+
+    def goto_view(self, view: int) -> None: ...
+
+    def view_directions(self) -> list[tuple[float, float]]:
+        """(azimuth, elevation) in degrees of every view it can go to, seen from the object."""
+        ...
+
+
+@runtime_checkable
+class GroundTruthSource(Protocol):
+    """A device that knows the true scene it shows (mesh, reflectance, poses)."""
+
+    def write_ground_truth(self, folder: Path) -> None:
+        """Write the truth into ``folder``, the true poses as COLMAP text in ``folder/poses``."""
+        ...
+
+
+@dataclass
+class WhiteReference:
+    """A white reference set up in front of a camera, facing a light at ``distance_m``."""
+
+    camera: Camera
+    light: LightSource
+    distance_m: float
+    reflectance: np.ndarray | None  # on calibration's default grid; None: not known
+    description: str
+    region: tuple[int, int, int, int] | None  # pixel box on the reference; None: the centre
+    close: Callable[[], None]
+
+
+@runtime_checkable
+class WhiteReferenceSource(Protocol):
+    """A device that can set up a white reference by itself (no person places a tile)."""
+
+    def white_reference(
+        self, distance_m: float | None, region: tuple[int, int, int, int] | None
+    ) -> WhiteReference: ...
+
+
+@runtime_checkable
+class NamedSensitivity(Protocol):
+    """A camera whose spectral sensitivity is a built-in one, known by name."""
+
+    def sensitivity_name(self) -> str: ...

@@ -1,7 +1,7 @@
 """Backends by name (as python-seabreeze picks backends): a profile section names its
-``driver`` and this module builds it with its transport.
-
-``driver: sim`` is resolved by the capture code (the simulated rig), not here.
+``driver`` and this module builds it with its transport. Devices opened together from one
+profile share a :class:`~drivers.device_set.DeviceSet` (``driver: sim`` devices share one
+simulated world through it).
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from core.errors import RigError
+from drivers.device_set import DeviceSet
 from drivers.lights.k8062 import K8062_PID, VELLEMAN_VID
 from drivers.lights.magichome import PORT as MAGIC_HOME_PORT
 from drivers.lights.udmx import UDMX_PID, UDMX_PRODUCT, UDMX_VID
@@ -104,8 +105,11 @@ def _build(
     return cls(*args, **options)
 
 
-def _with_transport(cls_path: str) -> Callable[..., Any]:
-    def make(driver: str, options: dict[str, Any]) -> Any:
+Factory = Callable[[str, dict[str, Any], DeviceSet], Any]
+
+
+def _with_transport(cls_path: str) -> Factory:
+    def make(driver: str, options: dict[str, Any], devices: DeviceSet) -> Any:
         module, _, name = cls_path.rpartition(".")
         cls = getattr(importlib.import_module(module), name)
         transport = _transport(driver, options)
@@ -118,7 +122,23 @@ def _with_transport(cls_path: str) -> Callable[..., Any]:
     return make
 
 
-def _tuya(driver: str, options: dict[str, Any]) -> Any:
+def _sim(kind: str) -> Factory:
+    """The ``kind`` of the set's simulated rig (one world per device set)."""
+
+    def make(driver: str, options: dict[str, Any], devices: DeviceSet) -> Any:
+        try:
+            from drivers.sim.world import shared_rig
+        except ImportError as exc:
+            raise RigError(
+                "the simulated rig (drivers.sim) is not available",
+                f"install spectral-rig completely ({exc})",
+            ) from exc
+        return getattr(shared_rig(devices), kind)
+
+    return make
+
+
+def _tuya(driver: str, options: dict[str, Any], devices: DeviceSet) -> Any:
     from drivers.lights.tuya import TuyaBulb, open_bulb
 
     host = _transport_section(options).get("host")
@@ -139,13 +159,13 @@ def _tuya(driver: str, options: dict[str, Any]) -> Any:
     return _build("light", driver, TuyaBulb, options, bulb)
 
 
-def _manual(driver: str, options: dict[str, Any]) -> Any:
+def _manual(driver: str, options: dict[str, Any], devices: DeviceSet) -> Any:
     from drivers.lights.manual import ManualLight
 
     return _build("light", driver, ManualLight, options)
 
 
-LIGHTS: dict[str, Callable[[str, dict[str, Any]], Any]] = {
+LIGHTS: dict[str, Factory] = {
     "enttec-dmx-pro": _with_transport("drivers.lights.enttec.EnttecDmxPro"),
     "dmx": _with_transport("drivers.lights.enttec.EnttecDmxPro"),  # the common interface
     "rgbcw-serial": _with_transport("drivers.lights.rgbcw_serial.RgbcwSerialLight"),
@@ -154,10 +174,11 @@ LIGHTS: dict[str, Callable[[str, dict[str, Any]], Any]] = {
     "magic-home": _with_transport("drivers.lights.magichome.MagicHomeLight"),
     "tuya": _tuya,
     "manual": _manual,
+    "sim": _sim("light"),
 }
 
 
-def _gphoto2(driver: str, options: dict[str, Any]) -> Any:
+def _gphoto2(driver: str, options: dict[str, Any], devices: DeviceSet) -> Any:
     """``transport: {kind: usb, port: "usb:001,005"}`` or ``port:`` picks one camera;
     ``settings`` (the profile's camera_settings) are applied to the camera."""
     from drivers.cameras.gphoto2_camera import Gphoto2Camera
@@ -168,10 +189,10 @@ def _gphoto2(driver: str, options: dict[str, Any]) -> Any:
     return _build("camera", driver, Gphoto2Camera, options)
 
 
-def _file_camera(cls_path: str) -> Callable[[str, dict[str, Any]], Any]:
+def _file_camera(cls_path: str) -> Factory:
     """Cameras that only find files: the profile's exposure/ISO are their metadata fallback."""
 
-    def make(driver: str, options: dict[str, Any]) -> Any:
+    def make(driver: str, options: dict[str, Any], devices: DeviceSet) -> Any:
         module, _, name = cls_path.rpartition(".")
         cls = getattr(importlib.import_module(module), name)
         settings = options.pop("settings", None) or {}
@@ -184,14 +205,15 @@ def _file_camera(cls_path: str) -> Callable[[str, dict[str, Any]], Any]:
     return make
 
 
-CAMERAS: dict[str, Callable[[str, dict[str, Any]], Any]] = {
+CAMERAS: dict[str, Factory] = {
     "gphoto2": _gphoto2,
     "folder-watch": _file_camera("drivers.cameras.folder_watch.FolderWatchCamera"),
     "handheld-import": _file_camera("drivers.cameras.handheld.HandheldImportCamera"),
+    "sim": _sim("camera"),
 }
 
 
-def _pygame(driver: str, options: dict[str, Any]) -> Any:
+def _pygame(driver: str, options: dict[str, Any], devices: DeviceSet) -> Any:
     from drivers.projectors.pygame_display import PygameProjector
 
     if "size" in options:
@@ -199,10 +221,10 @@ def _pygame(driver: str, options: dict[str, Any]) -> Any:
     return _build("projector", driver, PygameProjector, options)
 
 
-PROJECTORS: dict[str, Callable[[str, dict[str, Any]], Any]] = {"pygame": _pygame}
+PROJECTORS: dict[str, Factory] = {"pygame": _pygame, "sim": _sim("projector")}
 
 
-def _seabreeze(driver: str, options: dict[str, Any]) -> Any:
+def _seabreeze(driver: str, options: dict[str, Any], devices: DeviceSet) -> Any:
     from drivers.spectrometers.seabreeze_spectrometer import SeabreezeSpectrometer, open_seabreeze
 
     device = open_seabreeze(options.pop("serial", None), options.pop("backend", None))
@@ -213,16 +235,20 @@ def _seabreeze(driver: str, options: dict[str, Any]) -> Any:
         raise
 
 
-def _file_import(driver: str, options: dict[str, Any]) -> Any:
+def _file_import(driver: str, options: dict[str, Any], devices: DeviceSet) -> Any:
     from drivers.spectrometers.file_import import FileImportSpectrometer
 
     return _build("spectrometer", driver, FileImportSpectrometer, options)
 
 
-SPECTROMETERS: dict[str, Callable[[str, dict[str, Any]], Any]] = {
+SPECTROMETERS: dict[str, Factory] = {
     "seabreeze": _seabreeze,
     "file-import": _file_import,
+    "sim": _sim("spectrometer"),
 }
+
+# Drivers whose devices know the scene they show (GroundTruthSource), e.g. its true poses.
+GROUND_TRUTH_DRIVERS = frozenset({"sim"})
 
 KINDS = {"light": LIGHTS, "camera": CAMERAS, "projector": PROJECTORS, "spectrometer": SPECTROMETERS}
 # Names per kind, read by profile validation (rig.profile.known_drivers).
@@ -236,29 +262,27 @@ def list_driver_names(kind: str | None = None) -> list[str]:
     return sorted(KINDS[kind])
 
 
-def _open(kind: str, spec: Mapping[str, Any]) -> Any:
+def _open(kind: str, spec: Mapping[str, Any], devices: DeviceSet | None) -> Any:
     driver, options = _section(spec, kind)
     table = KINDS[kind]
     if driver not in table:
-        extra = " (`sim` is handled by `rig capture`/`rig demo`)" if driver == "sim" else ""
         raise RigError(
-            f"unknown {kind} driver {driver!r}{extra}",
-            f"use one of: {', '.join(sorted(table))}",
+            f"unknown {kind} driver {driver!r}", f"use one of: {', '.join(sorted(table))}"
         )
-    return table[driver](driver, options)
+    return table[driver](driver, options, DeviceSet() if devices is None else devices)
 
 
-def open_light(spec: Mapping[str, Any]) -> LightSource:
-    return _open("light", spec)
+def open_light(spec: Mapping[str, Any], devices: DeviceSet | None = None) -> LightSource:
+    return _open("light", spec, devices)
 
 
-def open_camera(spec: Mapping[str, Any]) -> Camera:
-    return _open("camera", spec)
+def open_camera(spec: Mapping[str, Any], devices: DeviceSet | None = None) -> Camera:
+    return _open("camera", spec, devices)
 
 
-def open_projector(spec: Mapping[str, Any]) -> Projector:
-    return _open("projector", spec)
+def open_projector(spec: Mapping[str, Any], devices: DeviceSet | None = None) -> Projector:
+    return _open("projector", spec, devices)
 
 
-def open_spectrometer(spec: Mapping[str, Any]) -> Spectrometer:
-    return _open("spectrometer", spec)
+def open_spectrometer(spec: Mapping[str, Any], devices: DeviceSet | None = None) -> Spectrometer:
+    return _open("spectrometer", spec, devices)

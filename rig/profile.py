@@ -21,15 +21,16 @@ from typing import Any
 from core.errors import RigError
 from core.labels import is_reserved
 from core.yamlio import read_yaml
+from drivers.registry import GROUND_TRUTH_DRIVERS
 from reconstruct.poses.board import BoardSpec
 
 DEVICE_KINDS = ("light", "camera", "projector", "spectrometer")
 # Drivers the capture routes itself; the rest go to ``drivers.registry``.
-LOCAL_DRIVERS = {
-    "light": ("sim", "manual"),
-    "camera": ("sim",),
-    "projector": ("sim",),
-    "spectrometer": ("sim",),
+LOCAL_DRIVERS: dict[str, tuple[str, ...]] = {
+    "light": ("manual",),
+    "camera": (),
+    "projector": (),
+    "spectrometer": (),
 }
 MOUNT_TYPES = ("plate", "free")
 POSE_MODES = ("estimate", "known")
@@ -175,9 +176,6 @@ class Profile:
     def device(self, kind: str) -> Mapping[str, Any] | None:
         return self.devices.get(kind)
 
-    def uses_sim(self) -> bool:
-        return any(spec.get("driver") == "sim" for spec in self.devices.values())
-
 
 def shipped_profiles() -> list[str]:
     """Names of the profiles shipped as package data."""
@@ -300,11 +298,13 @@ class _Validator:
         poses = self.choice(top.get("poses", "estimate"), "poses", POSE_MODES)
         sim = self.mapping(top.get("sim", {}), "sim", None)
         self.sim_trajectory(sim.get("trajectory"))
-        if poses == "known" and not any(d.get("driver") == "sim" for d in devices.values()):
+        if poses == "known" and not any(
+            d.get("driver") in GROUND_TRUTH_DRIVERS for d in devices.values()
+        ):
             raise self.fail(
                 "poses",
-                "is 'known' but no device is simulated",
-                "'estimate' for a real rig (known poses come only from the sim)",
+                "is 'known' but no device knows the true poses",
+                "'estimate' for a real rig (known poses come only from the simulator)",
             )
         board = None
         if top.get("board") is not None:
@@ -338,7 +338,7 @@ class _Validator:
                 raise self.fail(
                     f"devices.{kind}.driver",
                     "is missing",
-                    f"a driver name, e.g. {', '.join(LOCAL_DRIVERS[kind])}",
+                    f"a driver name, e.g. {', '.join(known_drivers(kind)[:3])}",
                 )
             driver = self.string(spec["driver"], f"devices.{kind}.driver")
             known = known_drivers(kind)

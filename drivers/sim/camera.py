@@ -152,6 +152,10 @@ class SimCamera:
         self._hits = None
         self._weights.clear()
 
+    def sensitivity_name(self) -> str:
+        """The built-in sensitivity this camera renders with (:class:`NamedSensitivity`)."""
+        return self.sensor.sensitivity
+
     def set_pose(self, pose: Pose) -> None:
         self.pose = pose
 

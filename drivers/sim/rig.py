@@ -33,12 +33,10 @@ import yaml
 
 from core.errors import RigError
 from drivers.sim.ambient import room_spd
-from drivers.sim.camera import SensorConfig, SimCamera
+from drivers.sim.camera import SensorConfig
 from drivers.sim.config_keys import reject_unknown_keys
-from drivers.sim.light import SimLight
-from drivers.sim.projector import SimProjector
+from drivers.sim.members import RigCamera, RigLight, RigProjector, RigSpectrometer
 from drivers.sim.scene import SCENES, Scene, make_scene
-from drivers.sim.spectrometer import SimSpectrometer
 from drivers.sim.trajectory import (
     PlacementConfig,
     TrajectoryConfig,
@@ -82,12 +80,22 @@ def sfm_image_name(view: int) -> str:
 
 
 class SimRig:
-    """All simulated devices of one virtual capture (see module docstring for ``config``)."""
+    """All simulated devices of one virtual capture (see module docstring for ``config``);
+    ``reference_camera`` is the camera section of the white reference's rig (default: this
+    rig's)."""
 
-    def __init__(self, config: Mapping[str, Any] | None = None, seed: int = 0) -> None:
+    def __init__(
+        self,
+        config: Mapping[str, Any] | None = None,
+        seed: int = 0,
+        reference_camera: Mapping[str, Any] | None = None,
+    ) -> None:
         conf = dict(config or {})
         reject_unknown_keys(conf, _KEYS, "sim")
         self.seed = int(seed)
+        self.reference_camera = dict(
+            reference_camera if reference_camera is not None else conf.get("camera") or {}
+        )
         self.scene = _load_scene(conf, self.seed)
         self.ground = _ground(conf.get("ground"), len(self.scene.wavelengths))
         traj = dict(conf.get("trajectory") or {})
@@ -117,19 +125,21 @@ class SimRig:
         self.sensor = SensorConfig.from_mapping(conf.get("camera"))
         self.intrinsics: Intrinsics = self.sensor.intrinsics
         self.projector_offset = np.asarray(proj["offset_m"], dtype=float)
-        self.light = SimLight(illuminations=conf.get("illuminations"))
-        self.projector = SimProjector(
+        self.light = RigLight(illuminations=conf.get("illuminations"))
+        self.projector = RigProjector(
             Intrinsics.pinhole(int(proj["width"]), int(proj["height"]), float(proj["focal_px"]))
         )
-        self.camera = SimCamera(
+        self.camera = RigCamera(
             self.scene, self.light, self.projector, self.sensor, self.seed, ground=self.ground
         )
         self.camera.ambient_spd = room_spd(
             conf.get("ambient"), self.light, self.trajectory.radius_m
         )
-        self.spectrometer = SimSpectrometer(
+        self.spectrometer = RigSpectrometer(
             lambda: self.light.spd() + self.projector.spd(), seed=self.seed
         )
+        for device in (self.light, self.projector, self.camera, self.spectrometer):
+            device.rig = self
         self.view = 0
         self.goto_view(0)
 
@@ -150,6 +160,14 @@ class SimRig:
             if placement is None
             else self.projector_poses[placement]
         )
+
+    def view_directions(self) -> list[tuple[float, float]]:
+        """(azimuth, elevation) in degrees of every view's camera centre around the target."""
+        target = np.asarray(self.trajectory.target_m, dtype=float)
+        rel = np.array([np.asarray(p.center, dtype=float) for p in self.poses]) - target
+        az = np.degrees(np.arctan2(rel[:, 1], rel[:, 0])) % 360.0
+        el = np.degrees(np.arctan2(rel[:, 2], np.hypot(rel[:, 0], rel[:, 1])))
+        return list(zip(az.tolist(), el.tolist(), strict=True))
 
     def projector_placement(self, view: int) -> int | None:
         """The projector placement lighting ``view`` (None: the projector is on the plate)."""

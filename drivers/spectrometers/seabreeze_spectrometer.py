@@ -15,8 +15,11 @@ import numpy as np
 
 from core.errors import MissingDependencyError, RigError
 from drivers.protocols import Spectrum
+from drivers.spectrometers.autorange import auto_range
 
 log = logging.getLogger(__name__)
+
+SETTLED = 0.05  # peak within this relative distance of the target: auto-ranging stops
 
 
 def open_seabreeze(serial: str | None = None, backend: str | None = None) -> Any:
@@ -93,20 +96,21 @@ class SeabreezeSpectrometer:
 
     def auto_range(self, max_steps: int = 8) -> float:
         """Integration time putting the peak near ``target_fraction`` of full scale."""
-        for _ in range(max_steps):
-            peak = float(np.max(self._scan(1))) / self.full_scale
-            if peak >= self.saturation_fraction:
-                wanted = self.integration_time_s / 4
-            elif peak <= 0:
-                wanted = self.integration_time_s * 10
-            else:
-                wanted = self.integration_time_s * self.target_fraction / peak
-            wanted = float(np.clip(wanted, self.min_s, self.max_s))
-            if abs(wanted - self.integration_time_s) <= 0.05 * self.integration_time_s:
-                break
-            self.set_integration_time(wanted)
-        else:
-            log.warning("spectrometer auto-range did not settle after %d steps", max_steps)
+
+        def read() -> tuple[float, float, bool]:
+            peak = float(np.max(self._scan(1)))
+            return self.integration_time_s, peak, self._saturated(np.array([peak]))
+
+        auto_range(
+            read,
+            self.set_integration_time,
+            self.full_scale,
+            target_fill=self.target_fraction,
+            tolerance=SETTLED,
+            min_s=self.min_s,
+            max_s=self.max_s,
+            max_steps=max_steps,
+        )
         if self.dark is not None and self.dark.integration_time_s != self.integration_time_s:
             self.dark = None  # it was for another integration time
         log.info("spectrometer integration time %.4f s", self.integration_time_s)

@@ -235,8 +235,9 @@ def _new_info(
     }
     if profile.board is not None:  # the poses stage reads the board from here
         info["board"] = profile.board.to_dict()
-    if devices.sim is not None:
-        devices.sim.write_ground_truth(out / GROUND_TRUTH_DIR)
+    truth = devices.ground_truth
+    if truth is not None:
+        truth.write_ground_truth(out / GROUND_TRUTH_DIR)
         info["ground_truth"] = GROUND_TRUTH_DIR
         if profile.poses == "known":
             _write_known_poses(out)
@@ -245,6 +246,6 @@ def _new_info(
 
 
 def _write_known_poses(out: Path) -> None:
-    """SESSION/poses/: the sim's true poses (COLMAP text, images named as the decode stage
+    """SESSION/poses/: the true poses (COLMAP text, images named as the decode stage
     names views)."""
     shutil.copytree(out / GROUND_TRUTH_DIR / POSES_DIR, out / POSES_DIR)

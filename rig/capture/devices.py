@@ -1,24 +1,30 @@
-"""Open the devices a profile names: ``driver: sim`` goes to one shared simulated rig,
-``driver: manual`` to a light the person switches by hand, everything else to
-``drivers.registry``. Device failures are turned into ``RigError`` naming the device."""
+"""Open the devices a profile names through ``drivers.registry`` (``driver: manual`` lights go
+to a light the person switches by hand); the devices of one opening share a ``DeviceSet``.
+Device failures are turned into ``RigError`` naming the device."""
 
 from __future__ import annotations
 
-import copy
-import importlib
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from core.errors import RigError
-from drivers.protocols import Camera, LightSource, Projector, Spectrometer
-from reconstruct.poses.board import BoardSpec, board_texture
+from drivers import registry
+from drivers.device_set import DeviceSet
+from drivers.protocols import (
+    Camera,
+    GroundTruthSource,
+    LightSource,
+    Projector,
+    SelfPositioning,
+    Spectrometer,
+    WhiteReferenceSource,
+)
 from rig.profile import Profile
 
 Ask = Callable[[str], str]
+KINDS = ("camera", "light", "projector", "spectrometer")
 
 
 @dataclass
@@ -29,17 +35,41 @@ class RigDevices:
     light: LightSource | None = None
     projector: Projector | None = None
     spectrometer: Spectrometer | None = None
-    sim: Any | None = None  # drivers.sim.SimRig when any device is simulated
     names: dict[str, str] = field(default_factory=dict)  # kind -> driver name
 
+    def _devices(self) -> list[Any]:
+        return [
+            device
+            for device in (self.camera, self.light, self.projector, self.spectrometer)
+            if device is not None
+        ]
+
+    @property
+    def positioner(self) -> SelfPositioning | None:
+        """The device that moves the rig to each view itself; None: the person moves it."""
+        return next((d for d in self._devices() if isinstance(d, SelfPositioning)), None)
+
+    @property
+    def ground_truth(self) -> GroundTruthSource | None:
+        """The device that knows the true scene, when one does."""
+        return next((d for d in self._devices() if isinstance(d, GroundTruthSource)), None)
+
+    @property
+    def white_reference_source(self) -> WhiteReferenceSource | None:
+        """The device that sets up a white reference itself; None: the person places one."""
+        return next((d for d in self._devices() if isinstance(d, WhiteReferenceSource)), None)
+
     def goto_view(self, view: int) -> None:
-        """The sim moves its camera itself; a real rig is moved by the person."""
-        if self.sim is not None:
-            self.sim.goto_view(view)
+        """A self-positioning rig moves itself; a real rig is moved by the person."""
+        positioner = self.positioner
+        if positioner is not None:
+            kind = next(k for k in KINDS if getattr(self, k) is positioner)
+            with device_errors(kind, self.names.get(kind, "?"), f"move to view {view}"):
+                positioner.goto_view(view)
 
     def describe(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
-        for kind in ("camera", "light", "projector", "spectrometer"):
+        for kind in KINDS:
             device = getattr(self, kind)
             if device is not None:
                 with device_errors(kind, self.names.get(kind, "?"), "describe"):
@@ -72,69 +102,23 @@ def device_errors(kind: str, driver: str, action: str) -> Iterator[None]:
         ) from exc
 
 
-def open_sim(config: Mapping[str, Any], seed: int) -> Any:
-    try:
-        module = importlib.import_module("drivers.sim")
-    except ImportError as exc:
-        raise RigError(
-            "the simulated rig (drivers.sim) is not available",
-            f"install spectral-rig completely ({exc})",
-        ) from exc
-    return module.SimRig(config, seed=seed)
-
-
-def sim_config(profile: Profile) -> dict[str, Any]:
-    """The profile's ``sim`` section completed from the rest of the profile, so the virtual
-    rig matches the plan: as many views, the plate offset (or a free light), the elevations
-    and the distances the person is asked to step to, the illuminations, the camera settings,
-    the projector placements and the board (the ground plane the object stands on)."""
-    config = copy.deepcopy(dict(profile.sim))
-    config["views"] = profile.plan.views
-    trajectory = dict(config.get("trajectory") or {})
-    trajectory.setdefault("elevations_deg", list(profile.plan.trajectory.elevations_deg))
-    factors = profile.plan.trajectory.distance_factors
-    if factors and "distances_m" not in trajectory:  # the sim steps in and out as planned
-        from drivers.sim.trajectory import TrajectoryConfig  # the sim loads only when used
-
-        radius = float(trajectory.get("radius_m", TrajectoryConfig.radius_m))
-        trajectory["distances_m"] = [radius * f for f in factors]
-    if profile.light_mount.type == "free":
-        trajectory["light"] = "free"
-    elif profile.light_mount.offset_m is not None:
-        config["light_offset_m"] = list(profile.light_mount.offset_m)
-    config["trajectory"] = trajectory
-    config.setdefault("illuminations", {k: dict(v) for k, v in profile.illuminations.items()})
-    camera = dict(config.get("camera") or {})
-    for key in ("exposure_s", "iso"):
-        if key in profile.camera_settings:
-            camera.setdefault(key, profile.camera_settings[key])
-    config["camera"] = camera
+def device_set(profile: Profile, seed: int) -> DeviceSet:
+    """What the devices opened from ``profile`` share: its plan and mounts, its seed."""
     placements = profile.plan.projector
-    if placements is not None:
-        projector = dict(config.get("projector") or {})
-        projector["placements"] = placements.count
-        projector["views_per_placement"] = placements.views_per_placement
-        config["projector"] = projector
-    if profile.board is not None and "ground" not in config:
-        config["ground"] = board_ground(profile.board)
-    return config
-
-
-BOARD_PX_PER_M = 6000.0  # texture resolution: 0.17 mm texels, finer than a sub-pixel
-PAPER_REFLECTANCE = 0.85
-INK_REFLECTANCE = 0.04
-
-
-def board_ground(board: BoardSpec) -> dict[str, Any]:
-    """The sim's ground plane for a printed board: its paper/ink texture in the board's
-    world frame (z = 0, origin at the board centre), white paper and near-black ink."""
-    texture, extent = board_texture(board, BOARD_PX_PER_M)
-    return {
-        "texture": texture.astype(np.float32),
-        "extent": list(extent),
-        "paper": PAPER_REFLECTANCE,
-        "ink": INK_REFLECTANCE,
-    }
+    return DeviceSet(
+        seed=seed,
+        views=profile.plan.views,
+        elevations_deg=tuple(profile.plan.trajectory.elevations_deg),
+        distance_factors=tuple(profile.plan.trajectory.distance_factors),
+        free_light=profile.light_mount.type == "free",
+        light_offset_m=profile.light_mount.offset_m,
+        illuminations=profile.illuminations,
+        camera_settings=profile.camera_settings,
+        projector_placements=None if placements is None else placements.count,
+        views_per_placement=None if placements is None else placements.views_per_placement,
+        board=profile.board,
+        simulation=profile.sim,
+    )
 
 
 def open_devices(
@@ -145,11 +129,7 @@ def open_devices(
 ) -> RigDevices:
     """Open every device of ``kinds`` the profile names (the spectrometer only for the
     calibration wizard)."""
-    sim = (
-        open_sim(sim_config(profile), seed)
-        if any((profile.device(k) or {}).get("driver") == "sim" for k in kinds)
-        else None
-    )
+    shared = device_set(profile, seed)
     opened: dict[str, Any] = {}
     names: dict[str, str] = {}
     try:
@@ -159,17 +139,10 @@ def open_devices(
                 continue
             driver = str(spec["driver"])
             names[kind] = driver
-            if driver == "sim":
-                device = getattr(sim, kind, None)
-                if device is None:
-                    raise RigError(
-                        f"the simulated rig has no {kind}",
-                        f"remove devices.{kind} from {profile.source}",
-                    )
-            elif driver == "manual" and kind == "light":
+            if driver == "manual" and kind == "light":
                 device = open_manual_light(spec, profile, ask)
             else:
-                device = _open_registry(kind, spec, profile)
+                device = _open_registry(kind, spec, profile, shared)
             opened[kind] = device
     except BaseException:
         for device in opened.values():
@@ -182,7 +155,6 @@ def open_devices(
         light=opened.get("light"),
         projector=opened.get("projector"),
         spectrometer=opened.get("spectrometer"),
-        sim=sim,
         names=names,
     )
 
@@ -202,14 +174,9 @@ def open_manual_light(spec: Mapping[str, Any], profile: Profile, ask: Ask | None
     return ManualLight(channels, profile.illuminations, float(spec.get("settle_s", 0.0)), ask)
 
 
-def _open_registry(kind: str, spec: Mapping[str, Any], profile: Profile) -> Any:
-    try:
-        registry = importlib.import_module("drivers.registry")
-    except ImportError as exc:
-        raise RigError(
-            f"real {kind} drivers (drivers.registry) are not available",
-            "use a profile with driver: sim, or install spectral-rig completely",
-        ) from exc
+def _open_registry(
+    kind: str, spec: Mapping[str, Any], profile: Profile, shared: DeviceSet
+) -> Any:
     spec = dict(spec)
     if kind == "camera" and profile.camera_settings:
         spec["settings"] = {**dict(profile.camera_settings), **spec.get("settings", {})}
@@ -217,4 +184,4 @@ def _open_registry(kind: str, spec: Mapping[str, Any], profile: Profile) -> Any:
         spec.setdefault("illuminations", {k: dict(v) for k, v in profile.illuminations.items()})
     opener = getattr(registry, f"open_{kind}")
     with device_errors(kind, str(spec["driver"]), "open"):
-        return opener(spec)
+        return opener(spec, shared)

@@ -97,17 +97,14 @@ class StopRequest:
 
 
 def view_directions(devices: RigDevices, profile: Profile) -> list[tuple[float, float]]:
-    """(azimuth, elevation) per view: the sim's true trajectory when there is one, else the
-    profile's planned rings."""
+    """(azimuth, elevation) per view: where a self-positioning rig goes, else the profile's
+    planned rings."""
     n = profile.plan.views
-    poses = getattr(devices.sim, "poses", None)
-    if poses is not None and len(poses) >= n:
-        trajectory = getattr(devices.sim, "trajectory", None)
-        target = np.asarray(getattr(trajectory, "target_m", (0.0, 0.0, 0.0)), dtype=float)
-        rel = np.array([np.asarray(p.center, dtype=float) for p in list(poses)[:n]]) - target
-        az = np.degrees(np.arctan2(rel[:, 1], rel[:, 0])) % 360.0
-        el = np.degrees(np.arctan2(rel[:, 2], np.hypot(rel[:, 0], rel[:, 1])))
-        return list(zip(az.tolist(), el.tolist(), strict=True))
+    positioner = devices.positioner
+    if positioner is not None:
+        directions = positioner.view_directions()
+        if len(directions) >= n:
+            return directions[:n]
     return [profile.plan.trajectory.view_direction(v, n) for v in range(n)]
 
 
@@ -252,7 +249,7 @@ class RunEngine:
             f"move the projector to placement {msg.placement + 1}/{msg.n_placements} "
             "(leave the camera where it is; aim the projector at the object from a new side)"
         )
-        if self.ask is not None and self.devices.sim is None:
+        if self.ask is not None and self.devices.positioner is None:
             answer = self._prompt(text[0].upper() + text[1:] + ", then press Enter (q to stop) ")
             if answer.strip().lower() in ("q", "quit", "stop"):
                 raise self._stopped()
@@ -266,7 +263,7 @@ class RunEngine:
             msg.view,
             self.profile.plan.trajectory.distance_factor(msg.view),
         )
-        if self.ask is not None and self.devices.sim is None:
+        if self.ask is not None and self.devices.positioner is None:
             light = (
                 ", hold the light at a new place on the camera's side"
                 if self.profile.light_mount.type == "free"
@@ -285,8 +282,7 @@ class RunEngine:
                 raise self._stopped()
         else:
             self.console.print(f"view {msg.view + 1}/{msg.n_views}: {hint}", highlight=False)
-        with device_errors("sim", "sim", f"move to view {msg.view}"):
-            self.devices.goto_view(msg.view)
+        self.devices.goto_view(msg.view)
         if msg.view not in self.state.views_done:
             self.state.views_done.append(msg.view)
 

@@ -40,6 +40,7 @@ def test_list_driver_names() -> None:
         "magic-home",
         "manual",
         "rgbcw-serial",
+        "sim",
         "tuya",
         "udmx",
         "velleman-k8062",
@@ -50,8 +51,6 @@ def test_list_driver_names() -> None:
 def test_unknown_driver_lists_the_known_ones() -> None:
     with pytest.raises(RigError, match="use one of: dmx, enttec-dmx-pro, magic-home, manual"):
         open_light({"driver": "philips-hue"})
-    with pytest.raises(RigError, match="`sim` is handled by"):
-        open_camera({"driver": "sim"})
     with pytest.raises(RigError, match="no `driver:`"):
         open_light({"channels": {}})
 
@@ -104,7 +103,37 @@ def test_driver_names_for_profile_validation() -> None:
 
     assert set(DRIVERS) == {"light", "camera", "projector", "spectrometer"}
     assert "dmx" in DRIVERS["light"] and "gphoto2" in DRIVERS["camera"]
-    assert DRIVERS["projector"] == ("pygame",)
+    assert DRIVERS["projector"] == ("pygame", "sim")
+    assert all("sim" in names for names in DRIVERS.values())
+
+
+def test_driver_sim_resolves_through_the_registry_one_world_per_device_set() -> None:
+    from drivers.device_set import DeviceSet
+    from drivers.protocols import (
+        Camera,
+        GroundTruthSource,
+        SelfPositioning,
+        Spectrometer,
+        WhiteReferenceSource,
+    )
+    from drivers.registry import open_projector
+
+    pytest.importorskip("drivers.sim")
+    shared = DeviceSet(views=3, illuminations={"LED1": {"c": 1.0}})
+    camera = open_camera({"driver": "sim"}, shared)
+    light = open_light({"driver": "sim"}, shared)
+    projector = open_projector({"driver": "sim"}, shared)
+    spectrometer = open_spectrometer({"driver": "sim"}, shared)
+    assert isinstance(camera, Camera) and isinstance(light, LightSource)
+    assert isinstance(spectrometer, Spectrometer)
+    # one simulated world per device set: the camera renders the light and projector opened
+    assert camera.light is light and camera.projector is projector  # type: ignore[attr-defined]
+    assert light.illuminations == {"LED1": {"c": 1.0}}
+    assert len(camera.view_directions()) == 3  # type: ignore[attr-defined]
+    for capability in (SelfPositioning, GroundTruthSource, WhiteReferenceSource):
+        assert isinstance(camera, capability) and isinstance(light, capability)
+    other = open_camera({"driver": "sim"}, DeviceSet())
+    assert other.light is not light  # type: ignore[attr-defined]
 
 
 def test_registry_opens_the_serial_text_light_on_a_pty() -> None:

@@ -10,7 +10,8 @@ import pytest
 import yaml
 
 from core.errors import RigError
-from rig.capture.devices import sim_config
+from drivers.sim.world import world_config
+from rig.capture.devices import device_set
 from rig.capture.engine import coverage_hint
 from rig.cli import main
 from rig.profile import load_profile, shipped_profiles
@@ -141,7 +142,7 @@ def test_distance_factors_step_the_sim_and_prompt_the_person(tmp_path: Path) -> 
     path.write_text(yaml.safe_dump(data))
     trajectory = load_profile(path).plan.trajectory
     assert [trajectory.distance_factor(v) for v in range(4)] == [0.8, 1.0, 1.3, 0.8]
-    config = sim_config(load_profile(path))
+    config = world_config(device_set(load_profile(path), 0))
     assert config["trajectory"]["distances_m"] == pytest.approx([0.4, 0.5, 0.65])
     directions = [(0.0, 30.0), (120.0, 30.0), (240.0, 30.0)]
     assert "distance 0.8× the usual (step closer)" in coverage_hint(

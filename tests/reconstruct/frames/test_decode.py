@@ -17,7 +17,7 @@ from reconstruct.frames import decode
 from reconstruct.frames.decode import DecodeConfig, DecodeIndex, decode_raw, load_frame
 from reconstruct.frames.raw import read_linear_rgb, read_mosaic
 from rig.capture.frames import read_raw
-from rig.wizard import region_rgb
+from rig.wizard.reference_raw import region_rgb
 
 BLACK, WHITE = 2056, 15000
 

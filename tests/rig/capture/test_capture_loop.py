@@ -213,7 +213,7 @@ def test_real_profiles_hand_their_sections_to_the_driver_registry(
     specs: dict[str, dict] = {}
 
     def opener(kind, device):
-        def open_(spec):
+        def open_(spec, shared):
             specs[kind] = dict(spec)
             return device
 

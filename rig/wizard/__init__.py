@@ -1,0 +1,150 @@
+"""`rig calibrate wizard`: guided spectral calibration of a rig, step by step.
+
+1. spectrometer dark reference; 2. each illumination's SPD (measured, or imported from a
+file), plotted (:mod:`.lights`); 3. camera sensitivity (built-in or imported CSV,
+:mod:`.camera`); 4. radiometric scale from a photograph of a white reference of known
+reflectance at a measured distance facing the light (:mod:`.scale`, :mod:`.reference`);
+5. illumination selection report (:mod:`.selection`). Every step is scriptable with flags
+(``--yes``).
+
+A device that can set up a white reference itself (``WhiteReferenceSource``: the simulator's
+ColorChecker chart, seen head-on with the light at the camera) replaces the person's tile.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from rich.console import Console
+
+from calibration import defaults
+from calibration.grid import DEFAULT_GRID
+from calibration.spectra import resample
+from calibration.store import CalibrationStore
+from core.errors import RigError
+from rig.capture.devices import open_devices
+from rig.profile import load_profile
+from rig.wizard.camera import choose_camera
+from rig.wizard.common import Ask
+from rig.wizard.lights import measure_lights, parse_imports, plot_light
+from rig.wizard.reference import parse_region
+from rig.wizard.scale import scale_lights
+from rig.wizard.selection import selection_report
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.description = (
+        "Measure the rig's spectra step by step and write a calibration store: (1) dark "
+        "references, (2) each illumination's SPD, (3) the camera sensitivity, (4) the "
+        "radiometric scale from a white reference at a measured distance, (5) an illumination "
+        "selection report. Every prompt has a flag; --yes runs without prompts."
+    )
+    parser.add_argument("--profile", default="sim", help="rig profile (default: sim)")
+    parser.add_argument(
+        "--store",
+        metavar="DIR",
+        help="calibration store to write (default "
+        "$SPECTRAL_RIG_STORE or ~/.local/share/spectral-rig/calibration)",
+    )
+    parser.add_argument("--yes", "-y", action="store_true", help="no prompts; use the flags")
+    parser.add_argument("--seed", type=int, default=0, help="simulated rig seed")
+    parser.add_argument(
+        "--import",
+        dest="imports",
+        action="append",
+        default=[],
+        metavar="ILLUMINATION=FILE",
+        help="import this illumination's SPD from a spectrometer export "
+        "instead of measuring it (repeatable)",
+    )
+    camera = parser.add_mutually_exclusive_group()
+    camera.add_argument(
+        "--camera", help=f"built-in sensitivity ({', '.join(defaults.camera_names())})"
+    )
+    camera.add_argument(
+        "--camera-file", metavar="CSV", help="measured sensitivity wavelength_nm,R,G,B"
+    )
+    parser.add_argument(
+        "--reference-distance-m", type=float, help="light to white reference, metres"
+    )
+    parser.add_argument(
+        "--reference-reflectance",
+        default="auto",
+        metavar="VALUE|FILE",
+        help="white reference reflectance: a number (flat) or a CSV "
+        "(default: 0.99, or the sim chart's white patch)",
+    )
+    parser.add_argument(
+        "--reference-region",
+        metavar="X0,Y0,X1,Y1",
+        help="pixel box on the reference (default: a central square)",
+    )
+    parser.add_argument(
+        "--skip-scale",
+        action="store_true",
+        help="store relative SPDs (the reconstruction then has no absolute scale)",
+    )
+    parser.add_argument("--noise", type=float, default=0.01, help="selection noise (fraction)")
+    parser.add_argument(
+        "--plots", metavar="DIR", help="where to write PNG plots (default STORE/plots)"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    console = Console(stderr=True)
+    ask: Ask | None = None if args.yes else console.input
+    profile = load_profile(args.profile)
+    store_root = Path(args.store).expanduser() if args.store else _default_store()
+    plots = Path(args.plots) if args.plots else store_root / "plots"
+    imports = parse_imports(args.imports, profile)
+    parse_region(args.reference_region)  # bad flags fail before any measurement
+    if args.camera:
+        defaults.camera_source_description(args.camera)
+    kinds = ("camera", "light", "projector") + (
+        ("spectrometer",) if len(imports) < len(profile.plan.illuminations) else ()
+    )
+    devices = open_devices(profile, args.seed, ask, kinds)
+    try:
+        if args.yes and not args.skip_scale and args.reference_distance_m is None:
+            if devices.white_reference_source is None:
+                raise RigError(
+                    "--reference-distance-m is needed with --yes",
+                    "measure the light-to-reference distance in metres and pass it "
+                    "(or --skip-scale)",
+                )
+        lights = measure_lights(profile, devices, imports, ask, console)
+        camera_name, camera_w, camera_rgb, camera_prov = choose_camera(
+            args, profile, devices, ask
+        )
+        camera_grid = resample(camera_w, camera_rgb, DEFAULT_GRID, source=camera_name)
+        if args.skip_scale:
+            console.print("[yellow]radiometric scale skipped: SPDs stay relative[/]")
+        else:
+            scale_lights(args, profile, devices, lights, camera_grid, ask, console)
+    finally:
+        devices.close()
+    store = CalibrationStore(store_root)
+    store.add_camera(camera_name, camera_w, camera_rgb, camera_prov)
+    for light in lights:
+        values = light.values * (light.scale or 1.0)
+        entry = store.add_light(light.entry, light.wavelengths, values, light.provenance)
+        plot_light(light, values, plots, entry.version)
+    console.print(
+        f"[green]stored[/] camera '{camera_name}' and {len(lights)} light SPDs in {store.root}",
+        highlight=False,
+    )
+    selection_report(
+        {lt.name: lt.on_grid() * (lt.scale or 1.0) for lt in lights},
+        camera_grid,
+        args.noise,
+        plots,
+        console,
+    )
+    return 0
+
+
+def _default_store() -> Path:
+    from calibration.store import default_store_path
+
+    return default_store_path()
