@@ -51,7 +51,7 @@ def open_transport(spec: Mapping[str, Any], where: str = "transport") -> Transpo
             "see docs/usage-drivers.md for the values each transport type takes",
         ) from error
     if record:
-        from drivers.testing import RecordingTransport
+        from drivers.transports.replay import RecordingTransport
 
         try:
             return RecordingTransport(transport, record)
@@ -87,7 +87,7 @@ def _open(kind: Any, options: dict[str, Any], timeout: float) -> Transport:
 
         return SubprocessTransport(options.pop("command"), timeout_s=timeout, **options)
     if kind == "replay":
-        from drivers.testing import ScriptedTransport
+        from drivers.transports.replay import ScriptedTransport
 
         return ScriptedTransport.from_jsonl(options.pop("file"))
     raise RigError(f"unknown transport type {kind!r}", f"use one of: {', '.join(TRANSPORT_TYPES)}")

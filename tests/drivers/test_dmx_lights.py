@@ -11,7 +11,7 @@ from core.errors import RigError
 from drivers.lights.enttec import EnttecDmxPro
 from drivers.lights.k8062 import VellemanK8062, frame_reports
 from drivers.lights.udmx import UDmx
-from drivers.testing import ScriptedTransport
+from drivers.transports.replay import ScriptedTransport
 
 CHANNELS = {"r": 1, "g": 2, "b": 3, "c": 4, "w": 5}
 ILLUMINATIONS = {"LED1": {"c": 1.0}, "RED": {"r": 0.5}}

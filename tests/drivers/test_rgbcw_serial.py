@@ -8,8 +8,8 @@ import pytest
 from core.errors import RigError
 from drivers.lights.rgbcw_emulator import PWM_MAX, RgbcwEmulator, serve_pty
 from drivers.lights.rgbcw_serial import RgbcwSerialLight
-from drivers.testing import ScriptedTransport
 from drivers.transports import open_transport
+from drivers.transports.replay import ScriptedTransport
 
 ID_LINE = b"ID model=rig-rgbcw fw=1.0.0 serial=A17 channels=r,g,b,c,w pwm_bits=12\n"
 ILLUMINATIONS = {"LED1": {"c": 1.0}, "MIX": {"r": 0.25, "w": 0.5}}

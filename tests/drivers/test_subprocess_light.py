@@ -11,7 +11,7 @@ import pytest
 
 from core.errors import RigError
 from drivers.registry import open_light
-from drivers.testing import ScriptedTransport
+from drivers.transports.replay import ScriptedTransport
 
 EMULATOR = [sys.executable, "-m", "drivers.lights.rgbcw_emulator"]
 ROOT = Path(__file__).parents[2]

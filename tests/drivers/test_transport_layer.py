@@ -14,10 +14,10 @@ from types import SimpleNamespace
 import pytest
 
 from core.errors import MissingDependencyError, RigError
-from drivers.testing import RecordingTransport, ScriptedTransport, ScriptMismatch
 from drivers.transports import open_transport, redact
 from drivers.transports.base import NotAnsweringError
 from drivers.transports.hid_device import HidTransport
+from drivers.transports.replay import RecordingTransport, ScriptedTransport, ScriptMismatch
 from drivers.transports.serial_port import SerialTransport
 from drivers.transports.subprocess_pipe import SubprocessTransport
 from drivers.transports.tcp import TcpTransport

@@ -11,7 +11,7 @@ import pytest
 from core.errors import RigError
 from drivers.lights.magichome import MagicHomeLight
 from drivers.lights.tuya import TuyaBulb
-from drivers.testing import ScriptedTransport
+from drivers.transports.replay import ScriptedTransport
 from drivers.transports.tcp import TcpTransport
 
 STATE_QUERY = bytes([0x81, 0x8A, 0x8B, 0x96])
