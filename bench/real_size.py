@@ -63,7 +63,7 @@ SIZES = {
 def capture(session: Path, size: Size, seed: int) -> None:
     """The sim capture (rig demo's profile: two illuminations, poses from the board), once."""
     from rig.capture import run_capture
-    from rig.commands.demo import demo_profile
+    from rig.demo_profile import demo_profile
 
     if (session / "session.yaml").exists() and (session / "ground_truth").exists():
         return

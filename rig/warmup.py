@@ -131,7 +131,7 @@ def reconstruct_tiny_capture(folder: Path) -> None:
     """The child's work: a tiny sim capture reconstructed end to end in ``folder``."""
     from reconstruct.run.pipeline import run_reconstruction
     from rig.capture import run_capture
-    from rig.commands.demo import demo_profile
+    from rig.demo_profile import demo_profile
 
     profile = demo_profile(_VIEWS)
     profile["name"] = "kernel-warmup"

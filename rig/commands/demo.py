@@ -4,10 +4,8 @@ the truth, in minutes, printing a table and where the outputs are."""
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import time
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +22,7 @@ from reconstruct.poses.board import umeyama
 from reconstruct.poses.stage import SUMMARY as POSE_SUMMARY
 from reconstruct.run.logfile import run_logged
 from rig.capture import run_capture
+from rig.demo_profile import demo_profile
 from rig.outpaths import output_dir
 from rig.warmup import compile_kernels_once
 
@@ -40,21 +39,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--views", type=int, default=20, help="camera positions (default 20)")
     parser.add_argument("--seed", type=int, default=0, help="scene and noise seed")
     parser.set_defaults(func=handle)
-
-
-def demo_profile(views: int) -> dict[str, Any]:
-    """The shipped sim profile, sized for a demo: two illuminations, poses estimated from the
-    images (the scene stands on the profile's marker board), an exposure that fills the
-    sensor."""
-    text = (resources.files("profiles") / "sim.yaml").read_text(encoding="utf-8")
-    profile = copy.deepcopy(yaml.safe_load(text))
-    profile["name"] = "sim-demo"
-    profile["description"] = "rig demo: simulated rig, two illuminations, poses from the images"
-    profile["camera_settings"] = {"exposure_s": 1.0, "iso": 250}
-    profile["illuminations"] = {k: profile["illuminations"][k] for k in ("LED1", "LED2")}
-    profile["plan"]["views"] = int(views)
-    profile["poses"] = "estimate"
-    return profile
 
 
 def handle(args: argparse.Namespace) -> int:

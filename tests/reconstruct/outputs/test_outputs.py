@@ -193,7 +193,7 @@ def test_unknown_settings_name_the_key() -> None:
 
 
 def test_demo_profile_is_a_valid_sim_profile() -> None:
-    from rig.commands.demo import demo_profile
+    from rig.demo_profile import demo_profile
     from rig.profile import parse_profile
 
     profile = parse_profile(demo_profile(12), "demo profile")
