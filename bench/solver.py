@@ -421,7 +421,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--settings",
         default="{}",
-        help='OptimiseSettings overrides (JSON), e.g. {"solver": {"preconditioner": "block"}}',
+        help='OptimiseSettings overrides (JSON), e.g. {"solver": {"cg_tolerance": 0.003}}',
     )
     args = parser.parse_args(argv)
     console = make_console()

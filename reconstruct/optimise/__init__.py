@@ -3,7 +3,7 @@
 
 from reconstruct.optimise.cost import JointCost, Linearisation
 from reconstruct.optimise.problem import Frames, Observations, Problem, Rig, Weights
-from reconstruct.optimise.solver import SolverSettings, keep_freed_memory, levenberg_marquardt
+from reconstruct.optimise.solver import SolverSettings, levenberg_marquardt
 from reconstruct.optimise.steps import (
     OptimiseInput,
     OptimiseResult,
@@ -25,7 +25,6 @@ __all__ = [
     "SolverSettings",
     "Weights",
     "build_problem",
-    "keep_freed_memory",
     "levenberg_marquardt",
     "optimise",
 ]

@@ -24,12 +24,7 @@ from reconstruct.optimise.cost import JointCost, Robust
 from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
 from reconstruct.optimise.problem import Frames, LightMode, Observations, Problem, Rig, Weights
 from reconstruct.optimise.sampling import blur_frames, sample_pairs, taps_valid
-from reconstruct.optimise.solver import (
-    PRECONDITIONERS,
-    IterationRecord,
-    SolverSettings,
-    levenberg_marquardt,
-)
+from reconstruct.optimise.solver import IterationRecord, SolverSettings, levenberg_marquardt
 from reconstruct.optimise.uncertainty import (
     VertexUncertainty,
     reflectance_prior,
@@ -72,11 +67,9 @@ class OptimiseSettings:
     # observation rebuild between stages moves the problem more than steps 9-15 did (external
     # spot, 100k vertices: final accuracy 0.235 mm with 15 per stage, 0.238 mm with 8).
     joint_iterations: int = 8
+    # Vertices move along their normals (fixed per joint stage), not in 3-D as in the paper:
+    # shading and the geometric term are blind to tangential motion, along which they drift.
     optimise_positions: bool = True
-    # "normal": each vertex moves along its normal (fixed per joint stage); "free": in 3-D as
-    # in the paper. Shading and the geometric term are blind to tangential motion, so free
-    # vertices drift in textureless regions and can fold into spikes that cast false shadows.
-    position_motion: str = "normal"
     # Runaway guard: per joint stage a vertex moves at most ``max_step_edges`` of its local mean
     # edge length, and at most ``max_total_edges`` (initial mesh's edges) from the initial mesh;
     # vertices seen (at non-grazing angles) from fewer than ``min_views`` views keep their
@@ -107,11 +100,6 @@ class OptimiseSettings:
     # bilinear taps straddle the silhouette and mix in the background.
     min_view_cos: float = 0.3
     shadow_eps: float = 1e-4
-    # Per-vertex reflectance std (optimise/uncertainty.py): "training" is the expected error
-    # of the estimate under the data and the training reflectances as the prior (their spread
-    # on what the camera does not see, and how far the regularisers pulled the estimate);
-    # "regularisers" reads the smoothness terms as the prior (plain Gauss–Newton: over-confident).
-    uncertainty_prior: str = "training"
     solver: SolverSettings = field(default_factory=SolverSettings)
 
     @classmethod
@@ -149,26 +137,12 @@ class OptimiseSettings:
                 f"{where}: gamma is {gamma!r}, not three non-negative numbers", "e.g. [3, 4, 0.01]"
             )
         check_types(conf, cls(), where, low=0.0, lows={"min_view_cos": -1.0})
-        check_types(solver, SolverSettings(), f"{where} solver", low=0.0, lows={"coarse_hops": 1})
+        check_types(solver, SolverSettings(), f"{where} solver", low=0.0)
         out = cls(**conf, solver=SolverSettings(**solver))
         out.gamma = tuple(float(g) for g in gamma)  # type: ignore[assignment]
-        if out.solver.preconditioner not in PRECONDITIONERS:
-            raise RigError(
-                f"{where}: solver preconditioner {out.solver.preconditioner!r} is unknown",
-                f"use {' or '.join(PRECONDITIONERS)}",
-            )
-        if out.position_motion not in ("normal", "free"):
-            raise RigError(
-                f"{where}: position_motion {out.position_motion!r} is unknown", "use normal or free"
-            )
         if out.light_mode not in ("offset", "free", "fixed"):
             raise RigError(
                 f"{where}: light_mode {out.light_mode!r} is unknown", "use offset, free or fixed"
-            )
-        if out.uncertainty_prior not in ("training", "regularisers"):
-            raise RigError(
-                f"{where}: uncertainty_prior {out.uncertainty_prior!r} is unknown",
-                "use training or regularisers",
             )
         if out.robust not in ("none", "huber", "cauchy"):
             raise RigError(
@@ -544,9 +518,7 @@ def optimise(
         views = np.bincount(o.vertex[o.pair_start], minlength=problem.n_vertices)
         mask = problem.mask(True, True, free_light)
         mask[problem.slices()[0]] = np.repeat(views >= max(cfg.min_views, 1), 3)
-        directions = None
-        if cfg.position_motion == "normal":
-            directions, _ = vertex_normals(X_prev, problem.faces)
+        directions, _ = vertex_normals(X_prev, problem.faces)
         stage = "coarse" if coarse else "joint"
         step_radius = cfg.max_step_edges * problem.weights.scale
         if coarse:  # the blurred cue reaches σ: let the vertices follow it
@@ -586,7 +558,7 @@ def optimise(
         JointCost(problem, cfg.robust, cfg.robust_scale),
         theta,
         (views >= max(cfg.min_views, 1)) & solved,
-        reflectance_prior(inp.basis) if cfg.uncertainty_prior == "training" else None,
+        reflectance_prior(inp.basis),
     )
     seconds["uncertainty"] = time.perf_counter() - t0
     X, A, light = problem.unpack(theta)
