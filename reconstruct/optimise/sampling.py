@@ -14,7 +14,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from reconstruct.model.camera import Intrinsics, Pose
-from reconstruct.optimise.kernels import project_points, sample_bilinear
+from reconstruct.optimise.kernels import sample_bilinear
 from reconstruct.optimise.problem import Frames
 
 
@@ -143,17 +143,3 @@ def view_cameras(intrinsics: list[Intrinsics], poses: list[Pose]) -> ViewCameras
     camera = np.array([[i.K[0, 0], i.K[1, 1], i.K[0, 2], i.K[1, 2]] for i in intrinsics])
     distortion = np.stack([i.distortion() for i in intrinsics]).astype(float)
     return R, t, camera, distortion
-
-
-def project_with_jacobian(
-    intrinsics: Intrinsics, pose: Pose, points: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel coordinates (M, 2) of world points and ``∂uv/∂x`` (M, 2, 3), analytically."""
-    idx = np.arange(len(points))
-    return project_points(
-        np.asarray(points, dtype=float),
-        idx,
-        np.zeros_like(idx),
-        *view_cameras([intrinsics], [pose]),
-        True,
-    )

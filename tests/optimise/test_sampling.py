@@ -7,13 +7,14 @@ import pytest
 from scipy.ndimage import map_coordinates
 
 from reconstruct.model.camera import Intrinsics, Pose
+from reconstruct.optimise.kernels import project_points
 from reconstruct.optimise.sampling import (
     bilinear,
     bilinear_taps,
-    project_with_jacobian,
     sample_pairs,
     sample_taps,
     taps_valid,
+    view_cameras,
 )
 
 
@@ -60,7 +61,8 @@ def test_projection_jacobian_with_distortion() -> None:
     pose = Pose.look_at(np.array([0.4, -0.3, 0.2]), np.zeros(3))
     rng = np.random.default_rng(2)
     x = 0.05 * rng.normal(size=(5, 3))
-    uv, duv = project_with_jacobian(intr, pose, x)
+    idx = np.arange(len(x))
+    uv, duv = project_points(x, idx, np.zeros_like(idx), *view_cameras([intr], [pose]), True)
     assert np.allclose(uv, intr.project_camera(pose.to_camera(x)))
     h = 1e-7
     for k in range(3):
