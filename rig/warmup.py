@@ -30,7 +30,12 @@ import yaml
 from rich.console import Console
 
 KERNEL_MODULES = (
-    "reconstruct.optimise.kernels",
+    "reconstruct.optimise.kernels.cg",
+    "reconstruct.optimise.kernels.normal_equations",
+    "reconstruct.optimise.kernels.normals",
+    "reconstruct.optimise.kernels.preconditioner",
+    "reconstruct.optimise.kernels.rendering",
+    "reconstruct.optimise.kernels.sampling",
     "reconstruct.initial_mesh.dense.plane_cost",
     "reconstruct.initial_mesh.dense.board_silhouette",
 )
@@ -65,9 +70,9 @@ def warmup_key() -> str:
 def stamp_path() -> Path | None:
     """Where the stamp goes: numba's cache folder for the optimiser's kernels (None: caching
     is off, so there is nothing to warm)."""
-    from reconstruct.optimise import kernels
+    from reconstruct.optimise.kernels.normal_equations import gram_products
 
-    folder = getattr(getattr(kernels.gram_products, "_cache", None), "_cache_path", None)
+    folder = getattr(getattr(gram_products, "_cache", None), "_cache_path", None)
     return None if folder is None else Path(folder) / STAMP_FILE
 
 

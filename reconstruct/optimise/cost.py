@@ -31,15 +31,14 @@ import scipy.sparse as sp
 
 from calibration.spectra import second_difference_matrix
 from reconstruct.model.forward import render_values, shading
-from reconstruct.optimise.kernels import (
+from reconstruct.optimise.kernels.normal_equations import (
     accumulate_normal_equations,
     gram_products,
     lower_products,
-    project_points,
-    rendered_error,
-    shading_gradients,
     vertex_diagonal_blocks,
 )
+from reconstruct.optimise.kernels.rendering import rendered_error, shading_gradients
+from reconstruct.optimise.kernels.sampling import project_points
 from reconstruct.optimise.mesh import NormalJacobian, adjacency, vertex_normals
 from reconstruct.optimise.problem import Problem
 from reconstruct.optimise.sampling import sample_pairs, view_cameras
@@ -378,8 +377,9 @@ class JointCost:
         frames of one view: g and h depend only on the vertex, its normal and the view's light)
         and ``V_o = [−G_o, 0, s Q_k]``. Expanding ``A_oᵀA_o`` lets the sums run over pairs and
         (vertex, illumination) groups instead of k×k products per observation; one compiled
-        pass over the observations accumulates them (:mod:`reconstruct.optimise.kernels`).
-        The light enters through ``w c_o g̃_pᵀ`` (g̃ = M_cᵀ g),
+        pass over the observations accumulates them
+        (:mod:`reconstruct.optimise.kernels.normal_equations`). The light enters through
+        ``w c_o g̃_pᵀ`` (g̃ = M_cᵀ g),
         so its coupling to vertex i is ``C_i = Σ_p a_p g̃_pᵀ`` with ``a_p = Σ_o A_oᵀ w c_o``.
         """
         p, o = self.p, self.p.obs

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from reconstruct.optimise.kernels import face_normal_sums, normal_jacobian_blocks
+from reconstruct.optimise.kernels.normals import face_normal_sums, normal_jacobian_blocks
 
 
 def adjacency(faces: np.ndarray, n_vertices: int) -> sp.csr_array:

@@ -14,7 +14,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from reconstruct.model.camera import Intrinsics, Pose
-from reconstruct.optimise.kernels import sample_bilinear
+from reconstruct.optimise.kernels.sampling import sample_bilinear
 from reconstruct.optimise.problem import Frames
 
 
@@ -137,7 +137,7 @@ ViewCameras = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 def view_cameras(intrinsics: list[Intrinsics], poses: list[Pose]) -> ViewCameras:
     """Per view R (V, 3, 3), t (V, 3), (fx, fy, cx, cy) (V, 4) and OpenCV (k1, k2, p1, p2)
-    (V, 4): the arrays :func:`~reconstruct.optimise.kernels.project_points` reads."""
+    (V, 4): the arrays :func:`~reconstruct.optimise.kernels.sampling.project_points` reads."""
     R = np.stack([np.asarray(pose.R, dtype=float) for pose in poses])
     t = np.stack([np.asarray(pose.t, dtype=float) for pose in poses])
     camera = np.array([[i.K[0, 0], i.K[1, 1], i.K[0, 2], i.K[1, 2]] for i in intrinsics])

@@ -21,15 +21,13 @@ import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
 from reconstruct.optimise.cost import JointCost, Linearisation
-from reconstruct.optimise.kernels import (
+from reconstruct.optimise.kernels.cg import cg_direction, cg_step, project_to_stage
+from reconstruct.optimise.kernels.preconditioner import (
     back_substitute_light,
-    cg_direction,
-    cg_step,
     coupling_transpose_product,
     damped_block_inverses,
     eliminate_shared_light,
     expand_positions,
-    project_to_stage,
     solve_vertex_blocks,
 )
 

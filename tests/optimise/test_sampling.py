@@ -7,7 +7,7 @@ import pytest
 from scipy.ndimage import map_coordinates
 
 from reconstruct.model.camera import Intrinsics, Pose
-from reconstruct.optimise.kernels import project_points
+from reconstruct.optimise.kernels.sampling import project_points
 from reconstruct.optimise.sampling import (
     bilinear,
     bilinear_taps,
@@ -108,7 +108,7 @@ def test_compiled_sampler_matches_the_numpy_one(dtype: type) -> None:
     """The cost samples through ``kernels.sample_bilinear`` (taps per pair, frames per
     observation); it must give the same values and gradients as :func:`sample_taps`, for the
     float16 frames of the pipeline (read by bit pattern) as for float32/64."""
-    from reconstruct.optimise.kernels import sample_bilinear
+    from reconstruct.optimise.kernels.sampling import sample_bilinear
 
     rng = np.random.default_rng(3)
     images = rng.uniform(size=(4, 9, 11, 3)).astype(dtype)
