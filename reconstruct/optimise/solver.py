@@ -20,7 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
-from reconstruct.optimise.cost import JointCost, Linearisation
+from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.kernels.cg import cg_direction, cg_step, project_to_stage
 from reconstruct.optimise.kernels.preconditioner import (
     back_substitute_light,
@@ -30,6 +30,7 @@ from reconstruct.optimise.kernels.preconditioner import (
     expand_positions,
     solve_vertex_blocks,
 )
+from reconstruct.optimise.linearisation import Linearisation
 
 _NO_DIRECTIONS = np.empty((0, 3))  # free motion
 _NO_DAMPING = np.empty(0)

@@ -7,7 +7,8 @@ import pytest
 
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.problem import Problem
-from reconstruct.optimise.steps import OptimiseSettings, build_problem
+from reconstruct.optimise.problem_setup import build_problem
+from reconstruct.optimise.steps import OptimiseSettings
 from reconstruct.optimise.synthetic import SyntheticScene, make_scene
 
 
