@@ -3,8 +3,9 @@
 1. spectrometer dark reference; 2. each illumination's SPD (measured, or imported from a
 file), plotted; 3. camera sensitivity (built-in or imported CSV); 4. radiometric scale from a
 photograph of a white reference of known reflectance at a measured distance facing the light,
-so that DESIGN.md's model ``y = s · Cᵀ diag(L) r`` with ``s = 1/d²`` holds in linear image
-units; 5. illumination selection report. Every step is scriptable with flags (``--yes``).
+so that the forward model ``y = s · Cᵀ diag(L) r`` with ``s = 1/d²`` holds in linear image
+units (docs/architecture.md, Radiometry); 5. illumination selection report. Every step is
+scriptable with flags (``--yes``).
 
 On the simulated rig the white reference is the ColorChecker's white patch of the sim's
 ``chart`` scene, seen head-on with the light at the camera.
@@ -653,7 +654,7 @@ def _plot_light(light: MeasuredLight, values: np.ndarray, plots: Path, version: 
     from calibration.plots import plot_spectrum
 
     slug = "".join(c if c.isalnum() or c in "-_." else "-" for c in light.entry)
-    unit = "scaled to DESIGN.md units" if light.scale else "relative"
+    unit = "scaled to the forward model's units" if light.scale else "relative"
     return plot_spectrum(
         light.wavelengths,
         values[:, None],

@@ -1,6 +1,7 @@
 """Decode stage: RAW (or linear TIFF/NPY) frames -> linear camera RGB + saturation masks.
 
-Values follow DESIGN.md: ``y = (raw - black) / (white - black) / (exposure_s * iso / 100)``,
+Values follow docs/architecture.md (Linear image values):
+``y = (raw - black) / (white - black) / (exposure_s * iso / 100)``,
 demosaiced in camera RGB with no white balance, colour matrix or gamma. LibRaw is told not to
 stretch the histogram (``no_auto_bright``, ``adjust_maximum_thr=0``), otherwise the gain would
 change from shot to shot. Its 16-bit output is then exactly ``65535 (raw - black) / (white -

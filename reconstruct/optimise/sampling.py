@@ -1,9 +1,9 @@
 """Observed colours at projected vertices: bilinear samples, their image gradients and the
 Jacobian of the projection — the disparity cue of the rendering term (paper Sec. 3.3.1).
 
-Pixel convention (DESIGN.md, COLMAP): the centre of array element ``[row, col]`` is at pixel
-coordinates ``(col + 0.5, row + 0.5)``. The bilinear interpolant is piecewise linear, so its
-gradient (used for ``∂y_obs/∂x``) is exact inside each pixel cell.
+Pixel convention (docs/architecture.md, Cameras and poses): the centre of array element ``[row,
+col]`` is at pixel coordinates ``(col + 0.5, row + 0.5)``. The bilinear interpolant is piecewise
+linear, so its gradient (used for ``∂y_obs/∂x``) is exact inside each pixel cell.
 """
 
 from __future__ import annotations

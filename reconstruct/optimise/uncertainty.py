@@ -3,7 +3,7 @@
 Each vertex's block of JᵀJ + priors (the exact per-vertex blocks the solver's preconditioner
 forms: rendering term, spectral smoothness, the vertex's share of the photometric smoothness and,
 through the normals, of the geometric term) is taken over [t, α]: t the motion along the vertex
-normal (the solver's ``position_motion: normal``; positions the solve kept fixed have no t) and
+normal (the solver's joint stages move vertices along it; positions kept fixed have no t) and
 α the basis weights.
 
 * noise: the rendering residuals give one image-noise variance per channel (χ² scale)
