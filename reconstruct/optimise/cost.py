@@ -272,14 +272,14 @@ class JointCost:
         when it was there, else None).
 
         :meth:`terms` (``reuse=False``) leaves the normal Jacobian out: a trial step needs only
-        the cost, and the linearisation after an accepted one adds it here (at 100k vertices
-        0.4 s saved per rejected or shortened trial)."""
+        the cost, and the linearisation after an accepted one adds it here (a rejected or
+        shortened trial never pays for it)."""
         kept, self._evaluated = self._evaluated, None
         terms = None
         if reuse and kept is not None and kept[1] == positions and np.array_equal(kept[0], theta):
             geo, state, terms = kept[2], kept[3], kept[4]
         else:
-            kept = None  # free the kept state before a new one exists (~0.4 kB per observation)
+            kept = None  # free the kept state before a new one exists (it scales with observations)
             X, A, light = self.p.unpack(theta)
             geo = self.geometry(X, derivatives=positions and reuse)
             state = self.render(X, A, light, geo.normals, derivatives=True, positions=positions)

@@ -40,10 +40,8 @@ _NO_DAMPING = np.empty(0)
 class SolverSettings:
     max_iterations: int = 30
     function_tolerance: float = 1e-4  # stop when a step lowers the cost by less than this share
-    # Stop when a step is rejected (backtracking included) right after one that lowered the
-    # cost by less than this share: the quadratic model no longer predicts the cost, and the
-    # retry at a higher λ costs a full CG solve for less than that gain (real size: the last
-    # joint stage spent 45 s on two rejections and a 0.02 % step).
+    # Stop when a step is rejected right after one that lowered the cost by less than this
+    # share: the model no longer predicts the cost, and a retry costs a CG solve for less.
     stall_tolerance: float = 2e-3
     step_tolerance: float = 1e-9  # stop when |δ| <= tol · (|θ| + tol)
     initial_lambda: float = 1e-3
@@ -215,11 +213,10 @@ def _glibc() -> ctypes.CDLL | None:
 def keep_freed_memory() -> Iterator[None]:
     """Keep large freed blocks in the heap while the block runs (glibc only; else a no-op).
 
-    glibc hands every freed block above its mmap threshold (128 KB, adapting up to 32 MB)
-    back to the kernel, so each iteration's fresh (observations × ·) temporaries are
-    page-faulted in again: in this VM that was 60 % of a 100k-vertex linearisation
-    (5.0 s → 1.8 s CPU with the blocks kept). Afterwards the defaults are restored and the
-    kept memory is trimmed, so the process shrinks back.
+    glibc hands every freed block above its mmap threshold back to the kernel, so each
+    iteration's fresh (observations × ·) temporaries would be page-faulted in again.
+    Afterwards the defaults are restored and the kept memory is trimmed, so the process
+    shrinks back.
     """
     libc = _glibc()
     if libc is None:
@@ -247,8 +244,8 @@ def levenberg_marquardt(
     """:func:`_levenberg_marquardt` with BLAS held to one thread and freed memory kept.
 
     The CG loop is made of short dot products and vectorised gathers where OpenBLAS's thread
-    hand-off costs more than it gains: on 2 cores a solve took 81.6 s with two BLAS threads
-    and 21.3 s with one (bench/solver.py, --blas-threads). See :func:`keep_freed_memory`.
+    hand-off costs more than it gains (bench/solver.py, --blas-threads). See
+    :func:`keep_freed_memory`.
     """
     with threadpool_limits(limits=1, user_api="blas"), keep_freed_memory():
         return _levenberg_marquardt(cost, theta, mask, settings, callback, directions, constrain)
@@ -314,8 +311,8 @@ def _levenberg_marquardt(
         del pre, op  # rebuilt next iteration; not held beside the trial render
         gd, dhd = float(g @ delta), float(delta @ lin.matvec(delta))
         # A step the model over-trusted is first shortened along the same direction (a
-        # `terms` evaluation each) before λ grows and CG solves again: most rejections
-        # came from steps only somewhat too long, and a CG solve costs ~10 evaluations.
+        # `terms` evaluation each) before λ grows and CG solves again: rejected steps are
+        # mostly only somewhat too long, and an evaluation costs far less than a CG solve.
         for shorten in range(cfg.backtracking_steps + 1):
             fraction = 0.5**shorten
             predicted = -(2.0 * fraction * gd + fraction**2 * dhd)

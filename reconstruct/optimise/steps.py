@@ -47,15 +47,10 @@ SettingsLightMode = Literal["offset", "free", "fixed"]
 class OptimiseSettings:
     """Settings of the joint optimisation (the ``optimise:`` section of a reconstruct config)."""
 
-    # γ1 (spectral smoothness) is 3, not the paper's 0.01: with 2 illuminations × 3 channels
-    # < N_b = 8 basis weights the spectral term must carry the null space (the far red under
-    # two white LEDs), and in the 8-bit units below 0.01 is ~0 — bright patches then end 0.3
-    # off at 650-700 nm. On the sim torus (40 views, bench/README.md) γ1 = 3 took the spectral
-    # RMSE from 0.084 to 0.058 (oracle 0.061) with the shape and the light unchanged.
-    # γ2 (photometric smoothness) is 4, twice the paper's 2: where a thin or folded part's
-    # normals end off, the vertex's own observations mis-scale its reflectance and only its
-    # neighbours can correct it (external cow, one ring: spectral RMSE 0.060 -> 0.053 against
-    # the oracle's 0.060; spot and nefertiti within +0.001-0.002, still under their oracles).
+    # γ1 (spectral) is 3, not the paper's 0.01: with 2 illuminations × 3 channels < N_b basis
+    # weights the spectral term must carry the null space (the far red under white LEDs).
+    # γ2 (photometric) is 4, not 2: where a thin part's normals end off, only the vertex's
+    # neighbours can correct its mis-scaled reflectance (docs/architecture.md, Cost).
     gamma: tuple[float, float, float] = (3.0, 4.0, 0.01)
     # The rendering term is evaluated in 8-bit units (image value × 255), as in the paper's
     # implementation: in 0..1 linear units the paper's γ over-regularise by 255² (the light
@@ -67,8 +62,7 @@ class OptimiseSettings:
     outer_iterations: int = 3
     light_iterations: int = 15
     # Each joint stage does most of its work in its first few steps; the shadow and
-    # observation rebuild between stages moves the problem more than steps 9-15 did (external
-    # spot, 100k vertices: final accuracy 0.235 mm with 15 per stage, 0.238 mm with 8).
+    # observation rebuild between stages moves the problem more than later steps would.
     joint_iterations: int = 8
     # Vertices move along their normals (fixed per joint stage), not in 3-D as in the paper:
     # shading and the geometric term are blind to tangential motion, along which they drift.
@@ -77,10 +71,8 @@ class OptimiseSettings:
     # edge length, and at most ``max_total_edges`` (initial mesh's edges) from the initial mesh;
     # vertices seen (at non-grazing angles) from fewer than ``min_views`` views keep their
     # positions. One or two corrupted views otherwise pull silhouette vertices into spikes.
-    # The stage cap is as wide as the total one: at 0.5 edges 30 % of the vertices of a
-    # PatchMatch start (0.5 mm off, 0.9 mm edges) sat on it from the first step, LM's
-    # steps no longer fitted the clamped problem and half were rejected (external spot: final
-    # accuracy 0.267 -> 0.235 mm, light 1.3 -> 1.0 mm with the cap at 2 edges).
+    # The stage cap is as wide as the total one: a tighter cap clamps many vertices of a
+    # dense start from the first step, and LM's steps then no longer fit the clamped problem.
     max_step_edges: float = 2.0
     max_total_edges: float = 2.0
     min_views: int = 2
@@ -333,7 +325,7 @@ def optimise(
         """The input of joint stage ``outer`` (light stage: 0): blurred frames while coarse."""
         k = max(outer, 1) - 1
         if k >= len(blurs):
-            levels.clear()  # the full-resolution stages need no blurred copy (0.5 GB at 800×600×80)
+            levels.clear()  # the full-resolution stages need no blurred copy
             return inp
         if k not in levels:
             levels.clear()  # one blurred copy of the images at a time
@@ -416,7 +408,7 @@ def optimise(
             step_radius: np.ndarray = step_radius,
         ) -> np.ndarray:
             """Trial steps stay in the trust regions, so LM never takes a step the stage end
-            would undo (a weakly held vertex flung 0.1 m, clamped back, broke its ring)."""
+            would undo (a weakly held vertex flung far and clamped back breaks its ring)."""
             X, A, light = problem.unpack(theta)
             return problem.pack(limit_motion(X, X_prev, X0, step_radius, total_radius), A, light)
 

@@ -30,12 +30,11 @@ N(μ, Σ) (a :class:`ReflectancePrior`) as the prior on α:
   residual outside the basis span is added per wavelength.
 
 Neighbour coupling: with the regularisers out of the prior, vertices couple only through the
-normals, the geometric term and the light; solving the whole linearised system for d and for the
-light's marginal covariance (tried on the bench) changed coverage by < 0.5 %, so the per-vertex
-blocks are kept. What this neglects (docs/usage-reconstruct.md): a solve that settles where its
-linearisation cannot tell it is wrong (the bench's perturbed start: shape and light off far
-beyond their local std, which scales the reflectance of whole regions), calibration errors
-(camera sensitivity, SPDs) and model errors beyond what the residuals show.
+normals, the geometric term and the light, weakly enough that the per-vertex blocks stand in for
+the whole linearised system. What this neglects (docs/usage-reconstruct.md): a solve that settles
+where its linearisation cannot tell it is wrong (shape and light off far beyond their local std,
+which scales the reflectance of whole regions), calibration errors (camera sensitivity, SPDs) and
+model errors beyond what the residuals show.
 """
 
 from __future__ import annotations

@@ -39,7 +39,7 @@ def accumulate_normal_equations(
 
     Returns the gram Σ_o A_oᵀA_o by its position rows (N, 6, k) — its α×α block is
     ``Σ_k s2_k QᵀQ_k`` with the returned per-(vertex, illumination) weights s2 = Σ w² s²
-    (N, K), stored as those K numbers instead of N_b² (68 instead of 157 MB at 100k) —
+    (N, K), stored as those K numbers instead of N_b² (less than half the memory) —
     grad_u (N, k), a_p = Σ_o A_oᵀ w c_o (P, k; empty for a light
     shared by all views), cc_p = Σ_o |w c_o|² (P,), e_p = Σ_o w c_o·r_o (P,) and, for a shared
     light, the vertex–light coupling Σ_p a_p g̃_pᵀ (N, k, 3) (else empty).
@@ -268,8 +268,7 @@ def lower_products(
     The transpose runs over copies of the blocks stored column by column (``dn_t_*``,
     ``jg_t_blocks``: the transpose's CSR), so every vertex writes only its own rows and reads
     its blocks in sequence (gathering them by index from the row-ordered arrays made this
-    product memory-latency bound: 61 → 36 ms on one core at 100k; sums in registers and
-    contiguous inner loops: 36 → 24 ms); ``jdx`` = J_g δx (N,) from :func:`gram_products`
+    product memory-latency bound); ``jdx`` = J_g δx (N,) from :func:`gram_products`
     (empty: the geometric rows are left out). Empty ``dn_t_blocks``: positions fixed."""
     n, k = yu.shape
     nb = dA.shape[1]
@@ -330,8 +329,7 @@ def vertex_diagonal_blocks(
     (N, K) of ``QtQ`` (K, N_b, N_b) (:func:`accumulate_normal_equations`); ``dn_blocks`` D
     (blocks, 3, 3) and ``geometric`` (blocks, 3) on the normal Jacobian's sparsity, stored
     column by column (the transpose's CSR: ``transpose_indptr``, rows ``transpose_row``); empty
-    ``dn_blocks``: positions fixed. One pass: NumPy's slice copies and sums took 300 ms at
-    100k, this 80."""
+    ``dn_blocks``: positions fixed. One pass instead of NumPy's slice copies and sums."""
     n, k = gram.shape[0], gram.shape[2]
     nb = k - 6
     with_normals = dn_blocks.shape[0] > 0

@@ -16,7 +16,7 @@ def damped_block_inverses(
     (``blocks`` (N, 3 + N_b, 3 + N_b) over [x, α]; ``shapes`` (N, 3, m) the position unknowns,
     ``alpha_mask`` (N, N_b) 1 = free). An unknown with no column (masked) gets a unit
     diagonal. The blocks are symmetric positive definite, so Gauss–Jordan needs no pivoting;
-    in place, per vertex, it is ~20× faster than NumPy's batched inverse of these 9×9s."""
+    in place, per vertex, it beats NumPy's batched inverse of these small blocks."""
     n, m, nb = blocks.shape[0], shapes.shape[2], alpha_mask.shape[1]
     k = m + nb
     out = np.zeros((n, k, k))
@@ -63,8 +63,8 @@ def solve_vertex_blocks(
     """``inverse[i] @ [shapes[i]ᵀ vx[i], va[i]]`` for every vertex i: the block
     preconditioner's vertex part, once per CG iteration. ``inverse`` (N, m + N_b, m + N_b)
     acts on [x or h, α]; ``shapes`` (N, 3, m) maps the block's m position unknowns to x (the
-    identity, or the vertex's normal when it moves along it). NumPy's einsums over these tiny
-    blocks took longer than the matvec at 130k vertices."""
+    identity, or the vertex's normal when it moves along it). Compiled: NumPy's einsums over
+    these tiny blocks cost more than the matvec."""
     n, k = inverse.shape[0], inverse.shape[1]
     m = shapes.shape[2]
     out = np.empty((n, k))
@@ -126,7 +126,7 @@ def eliminate_shared_light(
     C (N, 3 + N_b, 3) over [x, α] (B_i as in :func:`damped_block_inverses`, the light's columns
     masked by ``light_mask`` (3,) 1 = free), ``D_i⁻¹ C̃_i`` (N, m + N_b, 3) with the block
     inverses ``inverse``, and per vertex ``C̃_iᵀ D_i⁻¹ C̃_i`` (N, 3, 3), whose sum the Schur
-    complement subtracts. NumPy's batched products over these tiny blocks took 95 ms at 100k."""
+    complement subtracts. Compiled, as NumPy's batched products over tiny blocks are slow."""
     n, k = inverse.shape[0], inverse.shape[1]
     m = shapes.shape[2]
     nb = k - m

@@ -17,8 +17,7 @@ def rendered_error(
     observed: np.ndarray,
 ) -> np.ndarray:
     """Per observation the error s c − y_obs (M, 3), with s its pair's shading and c
-    ``colours[ill, vertex]``, in one pass (no per-observation s or c is kept: 0.15 GB at 5M
-    observations)."""
+    ``colours[ill, vertex]``, in one pass (no per-observation s or c is kept in memory)."""
     m_count = obs_pair.size
     error = np.empty((m_count, 3))
     for m in prange(m_count):

@@ -91,8 +91,8 @@ def project_points(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Pixel coordinates (P, 2) of the points ``X[vertex]`` in views ``view`` (P,), and with
     ``gradient`` ``∂uv/∂x`` (P, 2, 3) (else empty), in one pass: the optimiser projects every
-    (vertex, view) pair at each evaluation, and NumPy's passes over (P, 2, 3) arrays took a
-    tenth of the solve. Per view: world->camera ``R`` (V, 3, 3), ``t`` (V, 3); ``camera``
+    (vertex, view) pair at each evaluation, where NumPy's passes over (P, 2, 3) arrays cost a
+    large share of the solve. Per view: world->camera ``R`` (V, 3, 3), ``t`` (V, 3); ``camera``
     (V, 4) = fx, fy, cx, cy; ``distortion`` (V, 4) = OpenCV k1, k2, p1, p2
     (:meth:`Intrinsics.distortion`). A compiled copy of :meth:`Intrinsics.project_camera`
     (points on or behind the camera plane project to NaN); ``test_sampling.py`` holds the two
