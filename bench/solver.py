@@ -116,7 +116,8 @@ def worker_optimise(
 def _joint_problem(scene_path: Path, seed: int) -> tuple[Any, np.ndarray, np.ndarray]:
     """The first joint stage's problem from the perturbed shape and a wrong light."""
     from reconstruct.optimise.cost import JointCost
-    from reconstruct.optimise.steps import OptimiseSettings, build_problem, initial_reflectance
+    from reconstruct.optimise.problem_setup import build_problem, initial_reflectance
+    from reconstruct.optimise.steps import OptimiseSettings
 
     scene, inp = _start(scene_path, seed)
     cfg = OptimiseSettings()
@@ -421,7 +422,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--settings",
         default="{}",
-        help='OptimiseSettings overrides (JSON), e.g. {"solver": {"preconditioner": "block"}}',
+        help='OptimiseSettings overrides (JSON), e.g. {"solver": {"cg_tolerance": 0.003}}',
     )
     args = parser.parse_args(argv)
     console = make_console()

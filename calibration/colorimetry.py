@@ -37,13 +37,6 @@ def xyz_weights(
     return w / w[:, 1].sum()
 
 
-def reflectance_to_xyz(
-    reflectance: np.ndarray, grid: SpectralGrid = DEFAULT_GRID, illuminant: str | np.ndarray = "D65"
-) -> np.ndarray:
-    """CIE XYZ (…, 3) of reflectances (…, N_λ) under ``illuminant`` (white Y = 1)."""
-    return np.asarray(reflectance, dtype=float) @ xyz_weights(grid, illuminant)
-
-
 def reflectance_to_srgb(
     reflectance: np.ndarray, grid: SpectralGrid = DEFAULT_GRID, illuminant: str | np.ndarray = "D65"
 ) -> np.ndarray:

@@ -6,7 +6,7 @@
 * RGBCW bulb channels: *models*, not measurements — colour-science's Ohno (2005) LED model
   (:func:`colour.sd_multi_leds`) with the parameters in :data:`BULB_CHANNEL_MODELS`; the white
   channels are a blue pump plus a broad phosphor band. Scaled by the radiometric convention
-  (conventions-radiometry.md): a perfect white reflector facing the bulb at 0.5 m with every
+  (docs/architecture.md, Radiometry): a perfect white reflector facing the bulb at 0.5 m with every
   channel at level 1 gives 0.5 in the brightest channel of the default camera.
 * Reflectances: ColorChecker 24 (BabelColor average) and rawtoaces' 190 training patches.
 * CIE illuminants for relighting (:data:`colour.SDS_ILLUMINANTS`).

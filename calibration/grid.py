@@ -1,4 +1,5 @@
-"""The spectral grid every spectrum in spectral-rig lives on (DESIGN.md: 400–700 nm, 10 nm)."""
+"""The spectral grid every spectrum in spectral-rig lives on: 400–700 nm in 10 nm steps
+(docs/architecture.md, Spectral grid)."""
 
 from __future__ import annotations
 

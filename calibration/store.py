@@ -1,6 +1,6 @@
 """The calibration store: a directory of spectrum CSVs plus a YAML index with provenance.
 
-Layout (DESIGN.md, "Calibration store")::
+Layout (docs/architecture.md, Calibration store)::
 
     STORE/
       index.yaml                  format, then one record per entry *version*
@@ -43,7 +43,8 @@ _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+\- /]*$")
 
 
 def value_columns(kind: str) -> list[str]:
-    """The CSV value columns of a store entry of ``kind`` (DESIGN.md: power, or R,G,B)."""
+    """The CSV value columns of a store entry of ``kind``: power, or R,G,B
+    (docs/architecture.md, Calibration store)."""
     return ["power"] if kind == "light" else ["R", "G", "B"]
 
 

@@ -1,4 +1,5 @@
-"""The session directory (DESIGN.md, a public format): layout, manifest, safe writes.
+"""The session directory, a public format (docs/architecture.md, Session format): layout,
+manifest, safe writes.
 
 Capture writes it (``rig.capture``); reconstruction reads it. It lives here because
 ``reconstruct`` may not import ``rig``, and both need the same definition.

@@ -1,4 +1,4 @@
-"""One ``typing.Protocol`` per device kind (DESIGN.md, Devices).
+"""One ``typing.Protocol`` per device kind (docs/architecture.md, Devices).
 
 Drivers take a transport at construction (never a port string), so tests can script the
 bytes. Everything that captures or switches goes through these four shapes; the simulated

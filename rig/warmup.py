@@ -1,13 +1,11 @@
 """Compile the numba kernels in a throwaway process before the first reconstruction.
 
 numba keeps every kernel it compiles alive in its process together with its LLVM modules, and
-none of that is given back: compiling the optimiser's kernels left 0.18 GB more resident than
-loading them from numba's cache, and a first `rig reconstruct` after an install (the dense
-path's and the optimiser's kernels compiled inside the run) peaked at 4.3–4.7 GB where the same
-run with cached kernels peaks at 3.5 GB (bench/README.md, real_size). So, once per install, a
-child process reconstructs a tiny simulated capture — the same code path, so the kernels are
-compiled for the same types — and fills the cache; the real run then only loads them. A stamp
-beside the cache records the kernel sources, numba and CPU it was done for.
+none of that is given back, so a run that compiles its kernels peaks higher than one that loads
+them from numba's cache. So, once per install, a child process reconstructs a tiny simulated
+capture — the same code path, so the kernels are compiled for the same types — and fills the
+cache; the real run then only loads them. A stamp beside the cache records the kernel sources,
+numba and CPU it was done for.
 
 ``python -m rig.warmup`` is the child; ``SPECTRAL_RIG_WARMUP=0`` turns the step off.
 """
@@ -30,7 +28,12 @@ import yaml
 from rich.console import Console
 
 KERNEL_MODULES = (
-    "reconstruct.optimise.kernels",
+    "reconstruct.optimise.kernels.cg",
+    "reconstruct.optimise.kernels.normal_equations",
+    "reconstruct.optimise.kernels.normals",
+    "reconstruct.optimise.kernels.preconditioner",
+    "reconstruct.optimise.kernels.rendering",
+    "reconstruct.optimise.kernels.sampling",
     "reconstruct.initial_mesh.dense.plane_cost",
     "reconstruct.initial_mesh.dense.board_silhouette",
 )
@@ -65,9 +68,9 @@ def warmup_key() -> str:
 def stamp_path() -> Path | None:
     """Where the stamp goes: numba's cache folder for the optimiser's kernels (None: caching
     is off, so there is nothing to warm)."""
-    from reconstruct.optimise import kernels
+    from reconstruct.optimise.kernels.normal_equations import gram_products
 
-    folder = getattr(getattr(kernels.gram_products, "_cache", None), "_cache_path", None)
+    folder = getattr(getattr(gram_products, "_cache", None), "_cache_path", None)
     return None if folder is None else Path(folder) / STAMP_FILE
 
 

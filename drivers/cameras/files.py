@@ -1,4 +1,5 @@
-"""Safe placement of delivered frames: temporary name, fsync, rename (DESIGN.md, Reliability)."""
+"""Safe placement of delivered frames: temporary name, fsync, rename
+(docs/architecture.md, Reliability)."""
 
 from __future__ import annotations
 

@@ -2,10 +2,10 @@
 mosaics (Bayer) and writes a real DNG.
 
 Per frame: linear image ``y`` (forward model, anti-aliased) -> raw
-``black + y · (white − black) · exposure_s · iso / 100`` (DESIGN.md's linear convention, read
-backwards) -> shot noise (Poisson in electrons) + read noise (Gaussian, DN) -> rounded, clipped
-to ``[0, white]`` (saturation is real) -> Bayer mosaic -> DNG. Geometry (primary hits, shadow
-rays) is cached per pose so several illuminations of one view cost one trace.
+``black + y · (white − black) · exposure_s · iso / 100`` (docs/architecture.md, Linear image
+values, read backwards) -> shot noise (Poisson in electrons) + read noise (Gaussian, DN) ->
+rounded, clipped to ``[0, white]`` (saturation is real) -> Bayer mosaic -> DNG. Geometry
+(primary hits, shadow rays) is cached per pose so several illuminations of one view cost one trace.
 """
 
 from __future__ import annotations

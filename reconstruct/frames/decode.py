@@ -1,9 +1,10 @@
 """Decode stage: RAW (or linear TIFF/NPY) frames -> linear camera RGB + saturation masks.
 
-Values follow DESIGN.md: ``y = (raw - black) / (white - black) / (exposure_s * iso / 100)``,
-demosaiced in camera RGB with no white balance, colour matrix or gamma (RAW files are read by
-:mod:`reconstruct.frames.raw`). A pixel is saturated when any mosaic sample in its demosaic
-neighbourhood is at or near the white level; such pixels are never used.
+Values follow docs/architecture.md (Linear image values):
+``y = (raw - black) / (white - black) / (exposure_s * iso / 100)``, demosaiced in camera RGB with
+no white balance, colour matrix or gamma (RAW files are read by :mod:`reconstruct.frames.raw`). A
+pixel is saturated when any mosaic sample in its demosaic neighbourhood is at or near the white
+level; such pixels are never used.
 
 Outputs in ``recon/decoded/``: ``<frame>.npy`` (H x W x 3, float16, or float32 beyond its
 range), ``<frame>_sat.npy`` (bool mask), ``index.json`` (frame -> view, illumination, files,

@@ -11,12 +11,10 @@ and keeps an open mesh's outline exactly where the initial mesh put it.
 
 The stage subdivides until the mean edge length is at most ``target_px`` pixels in the
 views (edge ≈ target_px · depth / focal, median over visible vertex-view pairs), then
-recomputes visibility on the final mesh. A mesh already finer than that (a dense MVS mesh:
-Poisson at depth 9 gives ~0.7 px edges at 800×600) is first coarsened to the target by
-quadric decimation (``decimate``): vertices closer than the images resolve add unknowns and
-memory to the joint optimisation, not detail (spot, 800×600: 230k → 101k vertices, the
-initial mesh's accuracy 0.511 → 0.495 mm mean). Outputs in ``recon/subdivide/``: ``mesh.ply``,
-``visibility.npz``, ``subdivide.json``.
+recomputes visibility on the final mesh. A mesh already finer than that (a dense MVS mesh
+from Poisson) is first coarsened to the target by quadric decimation (``decimate``): vertices
+closer than the images resolve add unknowns and memory to the joint optimisation, not detail.
+Outputs in ``recon/subdivide/``: ``mesh.ply``, ``visibility.npz``, ``subdivide.json``.
 """
 
 from __future__ import annotations

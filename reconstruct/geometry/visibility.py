@@ -104,36 +104,6 @@ def compute_visibility(
     return Visibility(indptr, cols.astype(np.int32), z_all, views)
 
 
-def shadow_mask(
-    caster: RayCaster,
-    points: np.ndarray,
-    normals: np.ndarray,
-    lights: np.ndarray,
-    eps: float = 1e-4,
-) -> np.ndarray:
-    """m (N, L): 1 where the segment point -> light is free, for light positions (L, 3)."""
-    lights = np.atleast_2d(lights)
-    out = np.empty((len(points), len(lights)), bool)
-    for k, light in enumerate(lights):
-        out[:, k] = ~caster.occluded(points, light, eps, normals)
-    return out
-
-
-def pair_shadow_mask(
-    caster: RayCaster,
-    points: np.ndarray,
-    normals: np.ndarray,
-    visibility: Visibility,
-    lights: Mapping[int, np.ndarray],
-    eps: float = 1e-4,
-) -> np.ndarray:
-    """Shadow mask for each visible (vertex, view) pair of ``visibility`` (CSR order), with
-    the light of each view at ``lights[view]`` (e.g. ``Pose.light_position(v)``)."""
-    rows, cols = visibility.pairs()
-    targets = np.array([lights[int(v)] for v in visibility.views])[cols]
-    return ~caster.occluded(points[rows], targets, eps, normals[rows])
-
-
 def _visibility(mesh_path: Path, poses_dir: Path, conf: VisibilityConfig, out_dir: Path) -> None:
     mesh = read_mesh(mesh_path)
     intrinsics, poses, _ = poses_stage.load(poses_dir)

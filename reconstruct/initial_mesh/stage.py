@@ -311,12 +311,10 @@ def clip_to_hull(
     ``margin``) and that lie outside the visual hull (outside ``votes`` views' silhouettes)
     onto the closest point of the ``hull`` mesh, in place; returns how many moved.
 
-    Over a hole Poisson's smooth guess can flare centimetres out (on a 16-view sim capture,
-    22 % of the surface lay outside the hull, 14 mm off on average); the object lies inside
-    its hull, so there the hull's surface is the nearest place the vertex can be right.
-    Vertices stereo measured stay: silhouettes err too (a dark flank read as background in
-    a few views of the external spot scene), and clipping measured surface to them cost
-    0.6 mm of mean accuracy."""
+    Over a hole Poisson's smooth guess can flare centimetres out; the object lies inside its
+    hull, so there the hull's surface is the nearest place the vertex can be right. Vertices
+    stereo measured stay: silhouettes err too (a dark flank read as background in a few
+    views), and clipping measured surface to them costs accuracy."""
     vertices = np.array(mesh.vertices)
     guessed = np.ones(len(vertices), bool)
     if len(stereo_points):

@@ -1,4 +1,4 @@
-"""Cameras and poses in COLMAP's conventions (DESIGN.md).
+"""Cameras and poses in COLMAP's conventions (docs/architecture.md, Cameras and poses).
 
 World->camera ``x_c = R x_w + t``; pixel centre of the top-left pixel at (0.5, 0.5), so an
 image array index ``[row, col]`` covers pixel coordinates ``[col, col+1) x [row, row+1)``.

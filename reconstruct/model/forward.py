@@ -1,10 +1,10 @@
-"""The one forward image-formation model (DESIGN.md, paper eq. 12).
+"""The one forward image-formation model (docs/architecture.md, Forward model; paper eq. 12).
 
 ``y = m · s · C^T diag(L) r`` with ``s = max(0, (p − x)·n) / |p − x|³`` (near point light,
 inverse square, Lambertian) and ``m`` the binary shadow mask. The simulated rig renders with
 these functions, relighting renders with them and the optimiser inverts them, so a change of
 convention happens here once. The sum over wavelength is a plain sum: the grid step is absorbed
-into the SPD's scale (conventions-radiometry.md).
+into the SPD's scale (docs/architecture.md, Radiometry).
 """
 
 from __future__ import annotations

@@ -389,33 +389,3 @@ def render_image(
     w = light_weight(rc, hits, np.asarray(light_position, dtype=float))
     refl = with_ground(vertex_reflectance, ground)
     return shade(hits, [(w, response)], refl), hits.coverage()
-
-
-def render_projector_image(
-    vertices: np.ndarray,
-    faces: np.ndarray,
-    vertex_reflectance: np.ndarray,
-    intrinsics: Intrinsics,
-    pose: Pose,
-    projector_image: np.ndarray,
-    projector_intrinsics: Intrinsics,
-    projector_pose: Pose,
-    primary_responses: Sequence[np.ndarray],
-    supersample: int = 2,
-    normals: NormalMode = "smooth",
-    caster: RayCaster | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """One view lit by a projector showing ``projector_image``.
-
-    ``primary_responses`` are ``C^T diag(L_k)`` for the projector's R, G, B primaries.
-    """
-    if len(primary_responses) != 3:
-        raise RigError(
-            f"{len(primary_responses)} projector primary responses given",
-            "pass three (R, G, B primary SPDs through response_matrix)",
-        )
-    rc = caster or RayCaster(vertices, faces)
-    hits = trace_view(rc, intrinsics, pose, supersample, normals)
-    w = projector_weights(rc, hits, projector_image, projector_intrinsics, projector_pose)
-    terms = [(w[:, k], primary_responses[k]) for k in range(3)]
-    return shade(hits, terms, vertex_reflectance), hits.coverage()

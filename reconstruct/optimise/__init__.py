@@ -1,14 +1,15 @@
 """Joint optimisation of vertex positions, spectral reflectance and light positions
 (Spectral MVIR, paper eq. 1): cost and exact Jacobians, LM + PCG solver, the paper's steps."""
 
-from reconstruct.optimise.cost import JointCost, Linearisation
+from reconstruct.optimise.cost import JointCost
+from reconstruct.optimise.linearisation import Linearisation
 from reconstruct.optimise.problem import Frames, Observations, Problem, Rig, Weights
-from reconstruct.optimise.solver import SolverSettings, keep_freed_memory, levenberg_marquardt
+from reconstruct.optimise.problem_setup import build_problem
+from reconstruct.optimise.solver import SolverSettings, levenberg_marquardt
 from reconstruct.optimise.steps import (
     OptimiseInput,
     OptimiseResult,
     OptimiseSettings,
-    build_problem,
     optimise,
 )
 
@@ -25,7 +26,6 @@ __all__ = [
     "SolverSettings",
     "Weights",
     "build_problem",
-    "keep_freed_memory",
     "levenberg_marquardt",
     "optimise",
 ]

@@ -10,12 +10,10 @@ exactly as in the cost, not through a frozen approximation.
 
 from __future__ import annotations
 
-from functools import cached_property
-
 import numpy as np
 import scipy.sparse as sp
 
-from reconstruct.optimise.kernels import face_normal_sums, normal_jacobian_blocks, ring_pair_slots
+from reconstruct.optimise.kernels.normals import face_normal_sums, normal_jacobian_blocks
 
 
 def adjacency(faces: np.ndarray, n_vertices: int) -> sp.csr_array:
@@ -85,20 +83,6 @@ class NormalJacobian:
             self.block_col[self.transpose_block], np.arange(nv + 1)
         )
         self.transpose_row = self.block_row[self.transpose_block]
-
-    @cached_property
-    def ring_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The pattern of ``(∂n/∂X)ᵀ G ∂n/∂X`` over vertices (j, l share a ring): CSR
-        ``indptr``, ``indices``, and :func:`~reconstruct.optimise.kernels.ring_pair_slots`'
-        ``offsets`` and ``slots`` (where each vertex's block pairs land in it)."""
-        nv = self.n_vertices
-        ones = np.ones(self.n_blocks)
-        ring = sp.csr_array((ones, self.block_col, self.indptr), shape=(nv, nv))
-        pairs = (ring.T @ ring).tocsr()
-        pairs.sort_indices()
-        indptr, indices = pairs.indptr.astype(np.int64), pairs.indices.astype(np.int64)
-        offsets, slots = ring_pair_slots(self.indptr, self.block_col, indptr, indices)
-        return indptr, indices, offsets, slots
 
     def __call__(
         self, vertices: np.ndarray, normals: tuple[np.ndarray, np.ndarray] | None = None

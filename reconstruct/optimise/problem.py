@@ -84,8 +84,8 @@ class Observations:
         frame = np.asarray(frame, dtype=np.int64)
         view = frames.view[frame]
         order = np.lexsort((frame, view, vertex))
-        # int32 indices: four per observation, 0.08 GB less at 5M observations; arithmetic on
-        # them (flat indices) must widen first
+        # int32 indices: four per observation, so half the memory; arithmetic on them (flat
+        # indices) must widen first
         obs = cls(
             vertex[order].astype(np.int32),
             frame[order].astype(np.int32),

@@ -1,9 +1,9 @@
 """Observed colours at projected vertices: bilinear samples, their image gradients and the
 Jacobian of the projection — the disparity cue of the rendering term (paper Sec. 3.3.1).
 
-Pixel convention (DESIGN.md, COLMAP): the centre of array element ``[row, col]`` is at pixel
-coordinates ``(col + 0.5, row + 0.5)``. The bilinear interpolant is piecewise linear, so its
-gradient (used for ``∂y_obs/∂x``) is exact inside each pixel cell.
+Pixel convention (docs/architecture.md, Cameras and poses): the centre of array element ``[row,
+col]`` is at pixel coordinates ``(col + 0.5, row + 0.5)``. The bilinear interpolant is piecewise
+linear, so its gradient (used for ``∂y_obs/∂x``) is exact inside each pixel cell.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from reconstruct.model.camera import Intrinsics, Pose
-from reconstruct.optimise.kernels import project_points, sample_bilinear
+from reconstruct.optimise.kernels.sampling import sample_bilinear
 from reconstruct.optimise.problem import Frames
 
 
@@ -137,23 +137,9 @@ ViewCameras = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 def view_cameras(intrinsics: list[Intrinsics], poses: list[Pose]) -> ViewCameras:
     """Per view R (V, 3, 3), t (V, 3), (fx, fy, cx, cy) (V, 4) and OpenCV (k1, k2, p1, p2)
-    (V, 4): the arrays :func:`~reconstruct.optimise.kernels.project_points` reads."""
+    (V, 4): the arrays :func:`~reconstruct.optimise.kernels.sampling.project_points` reads."""
     R = np.stack([np.asarray(pose.R, dtype=float) for pose in poses])
     t = np.stack([np.asarray(pose.t, dtype=float) for pose in poses])
     camera = np.array([[i.K[0, 0], i.K[1, 1], i.K[0, 2], i.K[1, 2]] for i in intrinsics])
     distortion = np.stack([i.distortion() for i in intrinsics]).astype(float)
     return R, t, camera, distortion
-
-
-def project_with_jacobian(
-    intrinsics: Intrinsics, pose: Pose, points: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel coordinates (M, 2) of world points and ``∂uv/∂x`` (M, 2, 3), analytically."""
-    idx = np.arange(len(points))
-    return project_points(
-        np.asarray(points, dtype=float),
-        idx,
-        np.zeros_like(idx),
-        *view_cameras([intrinsics], [pose]),
-        True,
-    )

@@ -13,28 +13,25 @@ import ctypes.util
 import sys
 import time
 from collections.abc import Callable, Iterator
-from contextlib import AbstractContextManager, contextmanager, nullcontext
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
-from reconstruct.optimise.cost import JointCost, Linearisation
-from reconstruct.optimise.kernels import (
+from reconstruct.optimise.cost import JointCost
+from reconstruct.optimise.kernels.cg import cg_direction, cg_step, project_to_stage
+from reconstruct.optimise.kernels.preconditioner import (
     back_substitute_light,
-    cg_direction,
-    cg_step,
     coupling_transpose_product,
     damped_block_inverses,
     eliminate_shared_light,
     expand_positions,
-    project_to_stage,
     solve_vertex_blocks,
 )
-from reconstruct.optimise.multilevel import CoarseOperator, patch_bumps
+from reconstruct.optimise.linearisation import Linearisation
 
-PRECONDITIONERS = ("block", "two_level", "amg")
 _NO_DIRECTIONS = np.empty((0, 3))  # free motion
 _NO_DAMPING = np.empty(0)
 
@@ -43,36 +40,14 @@ _NO_DAMPING = np.empty(0)
 class SolverSettings:
     max_iterations: int = 30
     function_tolerance: float = 1e-4  # stop when a step lowers the cost by less than this share
-    # Stop when a step is rejected (backtracking included) right after one that lowered the
-    # cost by less than this share: the quadratic model no longer predicts the cost, and the
-    # retry at a higher λ costs a full CG solve for less than that gain (real size: the last
-    # joint stage spent 45 s on two rejections and a 0.02 % step).
+    # Stop when a step is rejected right after one that lowered the cost by less than this
+    # share: the model no longer predicts the cost, and a retry costs a CG solve for less.
     stall_tolerance: float = 2e-3
     step_tolerance: float = 1e-9  # stop when |δ| <= tol · (|θ| + tol)
     initial_lambda: float = 1e-3
     cg_tolerance: float = 1e-2  # inner solve relative residual (CG is cheap next to linearising)
-    # Nash's truncated-Newton test (Ceres's `eta`): CG also stops at iteration i once
-    # i (Q_i − Q_{i−1}) / Q_i < this, Q the quadratic model; 0 = off (the default). 0.01: CG
-    # 38 -> 28 its per step, 100k bench −13 % CPU, but from the real-size front accuracy
-    # 0.1710 -> 0.1724 mm (0.03: 0.1743 mm) while the cost falls lower (bench/README.md).
-    cg_model_tolerance: float = 0.0
     cg_max_iterations: int = 50
     backtracking_steps: int = 2  # halvings of a rejected step tried before λ grows
-    # "block": the per-vertex block preconditioner; "two_level": plus a coarse correction by
-    # patches of vertices moving together (multilevel.py), seeds `coarse_hops` edges apart;
-    # "amg": plus the whole position block, solved by an algebraic-multigrid V-cycle, where
-    # vertices move along their normals (CG: 21-45 -> 3-7 iterations at 100k vertices; in
-    # free motion the 3N-unknown block costs more to build than CG saves: "block" there).
-    # With "amg" take cg_tolerance 3e-3 (its CG iterations are cheap; 1e-2 left its results
-    # behind block's, 3e-2 far behind). Not the default: from the same fronts it is as
-    # accurate on two scenes and slightly less on two (real size: accuracy +0.8 %); 14 % less
-    # CPU at 100k on the bench scene for the same wall time, slower on the real-size capture
-    # (bench/README.md).
-    preconditioner: str = "block"
-    coarse_hops: int = 4
-    # Keep large freed blocks in the heap during the solve (glibc): −16 % time, +8 % peak RSS
-    # at 100k vertices (bench/README.md); False returns every freed block at once.
-    keep_freed_memory: bool = True
 
 
 @dataclass
@@ -198,7 +173,6 @@ def _pcg(
     precond: Callable[[np.ndarray], np.ndarray],
     tol: float,
     max_iter: int,
-    model_tol: float = 0.0,
 ) -> tuple[np.ndarray, int]:
     x = np.zeros_like(b)
     r = b.copy()
@@ -206,7 +180,6 @@ def _pcg(
     d = z.copy()
     rz = float(r @ z)
     target = tol * np.linalg.norm(b)
-    model = 0.0
     for k in range(1, max_iter + 1):
         q = matvec(d)
         dq = float(d @ q)
@@ -214,10 +187,6 @@ def _pcg(
             return x, k
         step = rz / dq
         if np.sqrt(cg_step(x, r, d, q, step)) <= target:
-            return x, k
-        # Q(x + αd) = Q(x) − α rᵀz / 2 for CG's α and d (no extra products)
-        previous, model = model, model - 0.5 * step * rz
-        if model_tol > 0 and k * (model - previous) / model < model_tol:
             return x, k
         z = precond(r)
         rz_new = float(r @ z)
@@ -244,11 +213,10 @@ def _glibc() -> ctypes.CDLL | None:
 def keep_freed_memory() -> Iterator[None]:
     """Keep large freed blocks in the heap while the block runs (glibc only; else a no-op).
 
-    glibc hands every freed block above its mmap threshold (128 KB, adapting up to 32 MB)
-    back to the kernel, so each iteration's fresh (observations × ·) temporaries are
-    page-faulted in again: in this VM that was 60 % of a 100k-vertex linearisation
-    (5.0 s → 1.8 s CPU with the blocks kept). Afterwards the defaults are restored and the
-    kept memory is trimmed, so the process shrinks back.
+    glibc hands every freed block above its mmap threshold back to the kernel, so each
+    iteration's fresh (observations × ·) temporaries would be page-faulted in again.
+    Afterwards the defaults are restored and the kept memory is trimmed, so the process
+    shrinks back.
     """
     libc = _glibc()
     if libc is None:
@@ -276,13 +244,10 @@ def levenberg_marquardt(
     """:func:`_levenberg_marquardt` with BLAS held to one thread and freed memory kept.
 
     The CG loop is made of short dot products and vectorised gathers where OpenBLAS's thread
-    hand-off costs more than it gains: on 2 cores a solve took 81.6 s with two BLAS threads
-    and 21.3 s with one (bench/solver.py, --blas-threads). See :func:`keep_freed_memory`.
+    hand-off costs more than it gains (bench/solver.py, --blas-threads). See
+    :func:`keep_freed_memory`.
     """
-    memory: AbstractContextManager[None] = (
-        keep_freed_memory() if (settings or SolverSettings()).keep_freed_memory else nullcontext()
-    )
-    with threadpool_limits(limits=1, user_api="blas"), memory:
+    with threadpool_limits(limits=1, user_api="blas"), keep_freed_memory():
         return _levenberg_marquardt(cost, theta, mask, settings, callback, directions, constrain)
 
 
@@ -299,16 +264,11 @@ def _levenberg_marquardt(
 
     With ``directions`` (N, 3 unit vectors) each vertex moves only along its direction
     (its normal): steps are projected with ``P = n nᵀ`` per vertex and CG runs on that subspace
-    (operator ``P H P``; the block preconditioner inverts the projected blocks). With
-    ``preconditioner: amg`` (and normal motion) or ``two_level`` a coarse correction
-    (:mod:`multilevel`: the whole position block by a multigrid V-cycle, or patches by LU)
-    wraps the block one; its ``A R`` is built once per CG solve. ``constrain`` maps a
-    trial θ into the feasible set (the vertices' trust regions); the model's prediction is of
-    the step taken.
+    (operator ``P H P``; the block preconditioner inverts the projected blocks). ``constrain``
+    maps a trial θ into the feasible set (the vertices' trust regions); the model's prediction
+    is of the step taken.
     """
     cfg = settings or SolverSettings()
-    if cfg.preconditioner not in PRECONDITIONERS:
-        raise ValueError(f"preconditioner {cfg.preconditioner!r}: use one of {PRECONDITIONERS}")
     theta = np.array(theta, dtype=float)
     mask = np.ascontiguousarray(mask, dtype=bool)
     sx = cost.p.slices()[0]
@@ -320,14 +280,6 @@ def _levenberg_marquardt(
         return out
 
     positions = bool(mask[sx].any())  # else the position derivatives are left out
-    bumps = None
-    if cfg.preconditioner == "two_level" and positions:
-        free = np.any(mask[sx].reshape(-1, 3), axis=1)
-        bumps = patch_bumps(cost.p.faces, theta[sx].reshape(-1, 3), free, cfg.coarse_hops)
-    coarse_space = positions and (
-        cfg.preconditioner == "two_level"
-        or (cfg.preconditioner == "amg" and directions is not None)
-    )
     lin = cost.linearise(theta, positions)
     blocks = lin.diagonal_blocks()
     lam, nu = cfg.initial_lambda, 2.0
@@ -355,22 +307,12 @@ def _levenberg_marquardt(
             project_to_stage(out, damping, v, mask, along)
             return out
 
-        precondition: Callable[[np.ndarray], np.ndarray] = pre
-        if coarse_space:  # A R once per CG solve
-            coarse = CoarseOperator(lin, bumps, mask, scale, directions)
-            precondition = coarse.preconditioner(lam, pre)
-        delta, cg_it = _pcg(
-            op, -g, precondition, cfg.cg_tolerance, cfg.cg_max_iterations, cfg.cg_model_tolerance
-        )
-        # rebuilt next iteration (the coarse operator too, if the step is rejected: its
-        # ~0.3 GB at 130k vertices would otherwise sit beside the trial render at the peak)
-        del pre, op, precondition
-        if coarse_space:
-            del coarse
+        delta, cg_it = _pcg(op, -g, pre, cfg.cg_tolerance, cfg.cg_max_iterations)
+        del pre, op  # rebuilt next iteration; not held beside the trial render
         gd, dhd = float(g @ delta), float(delta @ lin.matvec(delta))
         # A step the model over-trusted is first shortened along the same direction (a
-        # `terms` evaluation each) before λ grows and CG solves again: most rejections
-        # came from steps only somewhat too long, and a CG solve costs ~10 evaluations.
+        # `terms` evaluation each) before λ grows and CG solves again: rejected steps are
+        # mostly only somewhat too long, and an evaluation costs far less than a CG solve.
         for shorten in range(cfg.backtracking_steps + 1):
             fraction = 0.5**shorten
             predicted = -(2.0 * fraction * gd + fraction**2 * dhd)

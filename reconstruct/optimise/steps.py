@@ -15,27 +15,25 @@ from typing import Any, Literal
 import numpy as np
 
 from calibration.basis import SpectralBasis
-from calibration.estimation import DEFAULT_SMOOTHNESS, estimate_reflectance
+from calibration.estimation import DEFAULT_SMOOTHNESS
 from core.errors import RigError
-from reconstruct.model.forward import shading
-from reconstruct.model.raycast import RayCaster
 from reconstruct.optimise.checkpoint import Checkpoint, OptimiseState
 from reconstruct.optimise.cost import JointCost, Robust
-from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
-from reconstruct.optimise.problem import Frames, LightMode, Observations, Problem, Rig, Weights
-from reconstruct.optimise.sampling import blur_frames, sample_pairs, taps_valid
-from reconstruct.optimise.solver import (
-    PRECONDITIONERS,
-    IterationRecord,
-    SolverSettings,
-    levenberg_marquardt,
+from reconstruct.optimise.mesh import adjacency, vertex_normals
+from reconstruct.optimise.problem import Frames, Problem, Rig
+from reconstruct.optimise.problem_setup import (
+    build_problem,
+    initial_reflectance,
+    light_positions,
 )
+from reconstruct.optimise.sampling import blur_frames
+from reconstruct.optimise.solver import IterationRecord, SolverSettings, levenberg_marquardt
 from reconstruct.optimise.uncertainty import (
     VertexUncertainty,
     reflectance_prior,
     vertex_uncertainty,
 )
-from reconstruct.optimise.weights import edge_scale, photometric_weights
+from reconstruct.optimise.weights import edge_scale
 from reconstruct.run.config_check import check_types, is_number
 
 log = logging.getLogger(__name__)
@@ -49,15 +47,10 @@ SettingsLightMode = Literal["offset", "free", "fixed"]
 class OptimiseSettings:
     """Settings of the joint optimisation (the ``optimise:`` section of a reconstruct config)."""
 
-    # γ1 (spectral smoothness) is 3, not the paper's 0.01: with 2 illuminations × 3 channels
-    # < N_b = 8 basis weights the spectral term must carry the null space (the far red under
-    # two white LEDs), and in the 8-bit units below 0.01 is ~0 — bright patches then end 0.3
-    # off at 650-700 nm. On the sim torus (40 views, bench/README.md) γ1 = 3 took the spectral
-    # RMSE from 0.084 to 0.058 (oracle 0.061) with the shape and the light unchanged.
-    # γ2 (photometric smoothness) is 4, twice the paper's 2: where a thin or folded part's
-    # normals end off, the vertex's own observations mis-scale its reflectance and only its
-    # neighbours can correct it (external cow, one ring: spectral RMSE 0.060 -> 0.053 against
-    # the oracle's 0.060; spot and nefertiti within +0.001-0.002, still under their oracles).
+    # γ1 (spectral) is 3, not the paper's 0.01: with 2 illuminations × 3 channels < N_b basis
+    # weights the spectral term must carry the null space (the far red under white LEDs).
+    # γ2 (photometric) is 4, not 2: where a thin part's normals end off, only the vertex's
+    # neighbours can correct its mis-scaled reflectance (docs/architecture.md, Cost).
     gamma: tuple[float, float, float] = (3.0, 4.0, 0.01)
     # The rendering term is evaluated in 8-bit units (image value × 255), as in the paper's
     # implementation: in 0..1 linear units the paper's γ over-regularise by 255² (the light
@@ -69,22 +62,17 @@ class OptimiseSettings:
     outer_iterations: int = 3
     light_iterations: int = 15
     # Each joint stage does most of its work in its first few steps; the shadow and
-    # observation rebuild between stages moves the problem more than steps 9-15 did (external
-    # spot, 100k vertices: final accuracy 0.235 mm with 15 per stage, 0.238 mm with 8).
+    # observation rebuild between stages moves the problem more than later steps would.
     joint_iterations: int = 8
+    # Vertices move along their normals (fixed per joint stage), not in 3-D as in the paper:
+    # shading and the geometric term are blind to tangential motion, along which they drift.
     optimise_positions: bool = True
-    # "normal": each vertex moves along its normal (fixed per joint stage); "free": in 3-D as
-    # in the paper. Shading and the geometric term are blind to tangential motion, so free
-    # vertices drift in textureless regions and can fold into spikes that cast false shadows.
-    position_motion: str = "normal"
     # Runaway guard: per joint stage a vertex moves at most ``max_step_edges`` of its local mean
     # edge length, and at most ``max_total_edges`` (initial mesh's edges) from the initial mesh;
     # vertices seen (at non-grazing angles) from fewer than ``min_views`` views keep their
     # positions. One or two corrupted views otherwise pull silhouette vertices into spikes.
-    # The stage cap is as wide as the total one: at 0.5 edges 30 % of the vertices of a
-    # PatchMatch start (0.5 mm off, 0.9 mm edges) sat on it from the first step, LM's
-    # steps no longer fitted the clamped problem and half were rejected (external spot: final
-    # accuracy 0.267 -> 0.235 mm, light 1.3 -> 1.0 mm with the cap at 2 edges).
+    # The stage cap is as wide as the total one: a tighter cap clamps many vertices of a
+    # dense start from the first step, and LM's steps then no longer fit the clamped problem.
     max_step_edges: float = 2.0
     max_total_edges: float = 2.0
     min_views: int = 2
@@ -107,11 +95,6 @@ class OptimiseSettings:
     # bilinear taps straddle the silhouette and mix in the background.
     min_view_cos: float = 0.3
     shadow_eps: float = 1e-4
-    # Per-vertex reflectance std (optimise/uncertainty.py): "training" is the expected error
-    # of the estimate under the data and the training reflectances as the prior (their spread
-    # on what the camera does not see, and how far the regularisers pulled the estimate);
-    # "regularisers" reads the smoothness terms as the prior (plain Gauss–Newton: over-confident).
-    uncertainty_prior: str = "training"
     solver: SolverSettings = field(default_factory=SolverSettings)
 
     @classmethod
@@ -149,26 +132,12 @@ class OptimiseSettings:
                 f"{where}: gamma is {gamma!r}, not three non-negative numbers", "e.g. [3, 4, 0.01]"
             )
         check_types(conf, cls(), where, low=0.0, lows={"min_view_cos": -1.0})
-        check_types(solver, SolverSettings(), f"{where} solver", low=0.0, lows={"coarse_hops": 1})
+        check_types(solver, SolverSettings(), f"{where} solver", low=0.0)
         out = cls(**conf, solver=SolverSettings(**solver))
         out.gamma = tuple(float(g) for g in gamma)  # type: ignore[assignment]
-        if out.solver.preconditioner not in PRECONDITIONERS:
-            raise RigError(
-                f"{where}: solver preconditioner {out.solver.preconditioner!r} is unknown",
-                f"use {' or '.join(PRECONDITIONERS)}",
-            )
-        if out.position_motion not in ("normal", "free"):
-            raise RigError(
-                f"{where}: position_motion {out.position_motion!r} is unknown", "use normal or free"
-            )
         if out.light_mode not in ("offset", "free", "fixed"):
             raise RigError(
                 f"{where}: light_mode {out.light_mode!r} is unknown", "use offset, free or fixed"
-            )
-        if out.uncertainty_prior not in ("training", "regularisers"):
-            raise RigError(
-                f"{where}: uncertainty_prior {out.uncertainty_prior!r} is unknown",
-                "use training or regularisers",
             )
         if out.robust not in ("none", "huber", "cauchy"):
             raise RigError(
@@ -216,90 +185,6 @@ class OptimiseResult:
 Progress = Callable[[str, IterationRecord], None]
 
 
-def problem_mode(mode: SettingsLightMode) -> LightMode:
-    """How a solve parameterises the light: fixed lights are per-view positions kept out of
-    the optimised set."""
-    return "offset" if mode == "offset" else "free"
-
-
-def light_positions(rig: Rig, mode: SettingsLightMode, light: np.ndarray) -> np.ndarray:
-    light = np.asarray(light, dtype=float).reshape(-1, 3)
-    if mode != "offset":
-        return light
-    return np.stack([pose.light_position(light[0]) for pose in rig.poses])
-
-
-def build_problem(
-    inp: OptimiseInput, X: np.ndarray, light: np.ndarray, cfg: OptimiseSettings
-) -> Problem:
-    """The observation set and frozen weights at the current estimate (see module doc)."""
-    n = len(X)
-    normals, _ = vertex_normals(X, inp.faces)
-    P = light_positions(inp.rig, cfg.light_mode, light)
-    fr = inp.frames
-    if inp.visibility.shape != (n, inp.rig.n_views):
-        raise RigError(
-            f"visibility has shape {inp.visibility.shape}, expected ({n}, {inp.rig.n_views})",
-            "give one column per view of the poses",
-        )
-    verts, frame_ids = [], []
-    for f in range(fr.count):
-        vis = np.flatnonzero(inp.visibility[:, fr.view[f]])
-        verts.append(vis)
-        frame_ids.append(np.full(vis.size, f, dtype=np.int64))
-    vertex = np.concatenate(verts) if verts else np.zeros(0, np.int64)
-    frame = np.concatenate(frame_ids) if frame_ids else np.zeros(0, np.int64)
-    view = fr.view[frame]
-    keep = np.ones(vertex.size, dtype=bool)
-    observed = np.zeros((vertex.size, 3))
-    if inp.observed is not None:
-        observed = inp.observed[vertex, frame]
-        keep &= np.all(np.isfinite(observed), axis=1)
-    else:
-        assert fr.images is not None and fr.valid is not None
-        for c in range(inp.rig.n_views):
-            idx = np.flatnonzero(view == c)
-            if idx.size == 0:
-                continue
-            uv = inp.rig.intrinsics[c].project_camera(inp.rig.poses[c].to_camera(X[vertex[idx]]))
-            keep[idx] &= taps_valid(fr.valid, frame[idx], uv, cfg.margin_px)
-            observed[idx] = sample_pairs(fr.images, frame[idx], np.arange(idx.size), uv, False)[0]
-    s = shading(X[vertex], normals[vertex], P[view])
-    keep &= s > 0
-    centres = np.stack([pose.center for pose in inp.rig.poses])
-    to_cam = centres[view] - X[vertex]
-    cos_view = np.einsum("ij,ij->i", normals[vertex], to_cam) / np.linalg.norm(to_cam, axis=1)
-    keep &= cos_view >= cfg.min_view_cos
-    # Shadow masks: one ray per distinct (vertex, view), shared by that view's illuminations.
-    pair = vertex * inp.rig.n_views + view
-    upair, inverse = np.unique(pair[keep], return_inverse=True)
-    pv, pc = upair // inp.rig.n_views, upair % inp.rig.n_views
-    blocked = RayCaster(X, inp.faces).occluded(X[pv], P[pc], cfg.shadow_eps, normals[pv])
-    lit = np.ones(vertex.size, dtype=bool)
-    lit[np.flatnonzero(keep)] = ~blocked[inverse]
-    keep &= lit
-    fixed = observed[keep] if inp.observed is not None else None
-    obs = Observations.build(vertex[keep], frame[keep], fr, n, fixed)
-    adj = adjacency(inp.faces, n)
-    e = edges(adj)
-    order = np.lexsort((frame[keep], view[keep], vertex[keep]))
-    w = photometric_weights(
-        e,
-        obs.vertex,
-        obs.illumination,
-        observed[keep][order],
-        s[keep][order],
-        n,
-        inp.rig.responses.shape[0],
-        cfg.sigma_chroma,
-        cfg.sigma_intensity,
-    )
-    weights = Weights(cfg.gamma, e, w, edge_scale(X, adj), cfg.rendering_scale)
-    return Problem(
-        inp.faces, n, inp.basis.B, inp.rig, fr, obs, weights, problem_mode(cfg.light_mode)
-    )
-
-
 def limit_motion(
     X: np.ndarray,
     X_prev: np.ndarray,
@@ -336,40 +221,6 @@ def view_pixel_sizes(X: np.ndarray, inp: OptimiseInput) -> np.ndarray:
             depth = pose.to_camera(X[seen])[:, 2]
             out[c] = float(np.median(depth)) / float(intr.K[0, 0])
     return np.where(np.isfinite(out), out, np.nanmedian(out))
-
-
-def initial_reflectance(
-    problem: Problem, theta: np.ndarray, basis: SpectralBasis, smoothness: float
-) -> np.ndarray:
-    """α from the calibration module's 2-D estimate, per vertex, with the current shading:
-    each (vertex, illumination)'s observations are pooled by least squares into one RGB and a
-    shading weight; vertices never observed get the mean α."""
-    cost = JointCost(problem)
-    X, A, light = problem.unpack(theta)
-    normals, _ = vertex_normals(X, problem.faces)
-    st = cost.render(X, A, light, normals, derivatives=False)
-    o = problem.obs
-    s = st.pair_s[cost.obs_pair]
-    y_obs = s[:, None] * st.colours[o.illumination, o.vertex] - st.error
-    n, k = problem.n_vertices, problem.rig.responses.shape[0]
-    s2 = np.zeros((n, k))
-    sy = np.zeros((n, k, 3))
-    np.add.at(s2, (o.vertex, o.illumination), s**2)
-    np.add.at(sy, (o.vertex, o.illumination), s[:, None] * y_obs)
-    seen = s2 > 0
-    root = np.sqrt(s2)
-    rgb = np.full((n, k, 3), np.nan)
-    rgb[seen] = sy[seen] / root[seen][:, None]  # = root · (Σ s y / Σ s²)
-    alpha = np.full((n, basis.n_components), np.nan)
-    rows = np.flatnonzero(seen.any(axis=1))
-    if rows.size:
-        alpha[rows], _ = estimate_reflectance(
-            rgb[rows], problem.rig.responses, basis, smoothness, shading=root[rows]
-        )
-    good = np.all(np.isfinite(alpha), axis=1)
-    fill = alpha[good].mean(axis=0) if good.any() else basis.project(np.full(basis.B.shape[0], 0.5))
-    alpha[~good] = fill
-    return alpha
 
 
 def optimise(
@@ -474,7 +325,7 @@ def optimise(
         """The input of joint stage ``outer`` (light stage: 0): blurred frames while coarse."""
         k = max(outer, 1) - 1
         if k >= len(blurs):
-            levels.clear()  # the full-resolution stages need no blurred copy (0.5 GB at 800×600×80)
+            levels.clear()  # the full-resolution stages need no blurred copy
             return inp
         if k not in levels:
             levels.clear()  # one blurred copy of the images at a time
@@ -544,9 +395,7 @@ def optimise(
         views = np.bincount(o.vertex[o.pair_start], minlength=problem.n_vertices)
         mask = problem.mask(True, True, free_light)
         mask[problem.slices()[0]] = np.repeat(views >= max(cfg.min_views, 1), 3)
-        directions = None
-        if cfg.position_motion == "normal":
-            directions, _ = vertex_normals(X_prev, problem.faces)
+        directions, _ = vertex_normals(X_prev, problem.faces)
         stage = "coarse" if coarse else "joint"
         step_radius = cfg.max_step_edges * problem.weights.scale
         if coarse:  # the blurred cue reaches σ: let the vertices follow it
@@ -559,7 +408,7 @@ def optimise(
             step_radius: np.ndarray = step_radius,
         ) -> np.ndarray:
             """Trial steps stay in the trust regions, so LM never takes a step the stage end
-            would undo (a weakly held vertex flung 0.1 m, clamped back, broke its ring)."""
+            would undo (a weakly held vertex flung far and clamped back breaks its ring)."""
             X, A, light = problem.unpack(theta)
             return problem.pack(limit_motion(X, X_prev, X0, step_radius, total_radius), A, light)
 
@@ -586,7 +435,7 @@ def optimise(
         JointCost(problem, cfg.robust, cfg.robust_scale),
         theta,
         (views >= max(cfg.min_views, 1)) & solved,
-        reflectance_prior(inp.basis) if cfg.uncertainty_prior == "training" else None,
+        reflectance_prior(inp.basis),
     )
     seconds["uncertainty"] = time.perf_counter() - t0
     X, A, light = problem.unpack(theta)

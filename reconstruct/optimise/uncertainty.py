@@ -3,7 +3,7 @@
 Each vertex's block of JᵀJ + priors (the exact per-vertex blocks the solver's preconditioner
 forms: rendering term, spectral smoothness, the vertex's share of the photometric smoothness and,
 through the normals, of the geometric term) is taken over [t, α]: t the motion along the vertex
-normal (the solver's ``position_motion: normal``; positions the solve kept fixed have no t) and
+normal (the solver's joint stages move vertices along it; positions kept fixed have no t) and
 α the basis weights.
 
 * noise: the rendering residuals give one image-noise variance per channel (χ² scale)
@@ -16,10 +16,9 @@ normal (the solver's ``position_motion: normal``; positions the solve kept fixed
 Read as a prior, the smoothness regularisers claim far too much: 2 illuminations × 3 channels
 see fewer directions than the N_b basis weights, the regularisers fill the rest, and their error
 there (the metamer bias) dominates the actual error, while the plain covariance is smallest where
-that bias is. So by default (``optimise.uncertainty_prior: training``, a
-:class:`ReflectancePrior`) the std is about the *reported* estimate θ̂ under a Gaussian posterior
-made of the data blocks (regularisers out) and the training reflectances' basis weights
-N(μ, Σ) as the prior on α:
+that bias is. So the std is about the *reported* estimate θ̂ under a Gaussian posterior made
+of the data blocks (regularisers out) and the training reflectances' basis weights
+N(μ, Σ) (a :class:`ReflectancePrior`) as the prior on α:
 
 * posterior covariance ``Σ_post = (D + Σ⁻¹)⁻¹`` (D the data precision over [t, α]; t keeps the
   geometric term as its prior);
@@ -31,12 +30,11 @@ N(μ, Σ) as the prior on α:
   residual outside the basis span is added per wavelength.
 
 Neighbour coupling: with the regularisers out of the prior, vertices couple only through the
-normals, the geometric term and the light; solving the whole linearised system for d and for the
-light's marginal covariance (tried on the bench) changed coverage by < 0.5 %, so the per-vertex
-blocks are kept. What this neglects (docs/usage-reconstruct.md): a solve that settles where its
-linearisation cannot tell it is wrong (the bench's perturbed start: shape and light off far
-beyond their local std, which scales the reflectance of whole regions), calibration errors
-(camera sensitivity, SPDs) and model errors beyond what the residuals show.
+normals, the geometric term and the light, weakly enough that the per-vertex blocks stand in for
+the whole linearised system. What this neglects (docs/usage-reconstruct.md): a solve that settles
+where its linearisation cannot tell it is wrong (shape and light off far beyond their local std,
+which scales the reflectance of whole regions), calibration errors (camera sensitivity, SPDs) and
+model errors beyond what the residuals show.
 """
 
 from __future__ import annotations
@@ -95,12 +93,12 @@ def vertex_uncertainty(
     cost: JointCost,
     theta: np.ndarray,
     free_positions: np.ndarray,
-    prior: ReflectancePrior | None = None,
+    prior: ReflectancePrior,
 ) -> VertexUncertainty:
     """Per-vertex std at θ (module docstring); ``free_positions`` (N,) bool: vertices whose
-    position the last solve moved. With ``prior`` the std is the expected error of the estimate
-    under the data and that prior (regularisers out); without it, and always as
-    ``reflectance_std_gn``, the plain Gauss–Newton std with the regularisers as the prior."""
+    position the last solve moved. The std is the expected error of the estimate under the
+    data and ``prior`` (regularisers out); ``reflectance_std_gn`` is the plain Gauss–Newton std
+    with the regularisers as the prior."""
     p, o = cost.p, cost.p.obs
     n, nb = p.n_vertices, p.n_basis
     lin = cost.linearise(theta, positions=True)
@@ -130,18 +128,15 @@ def vertex_uncertainty(
     cov[idx] = np.linalg.pinv(H[idx], hermitian=True) * scale
     B = cost.B
     gn_std = _spectral_std(B, cov[:, 1:, 1:])
-    if prior is not None:
-        gx, ga, _ = p.unpack(lin.gradient())
-        reg_grad = cost.gamma[0] * A @ cost.SS + (cost.laplacian @ A) @ cost.BB
-        grad = np.zeros((n, 1 + nb))
-        grad[:, 0] = np.where(fixed, 0.0, np.einsum("ij,ij->i", gx, normals))
-        grad[:, 1:] = ga - reg_grad
-        data = H[idx].copy()
-        data[:, 1:, 1:] -= cost.gamma[0] * cost.SS + cost.lap_diag[idx, None, None] * cost.BB
-        cov[idx] = expected_error(data / scale, grad[idx] / scale[:, :, 0], A[idx], prior)
-    var = _spectral_var(B, cov[:, 1:, 1:])
-    if prior is not None:
-        var += prior.truncation_var
+    gx, ga, _ = p.unpack(lin.gradient())
+    reg_grad = cost.gamma[0] * A @ cost.SS + (cost.laplacian @ A) @ cost.BB
+    grad = np.zeros((n, 1 + nb))
+    grad[:, 0] = np.where(fixed, 0.0, np.einsum("ij,ij->i", gx, normals))
+    grad[:, 1:] = ga - reg_grad
+    data = H[idx].copy()
+    data[:, 1:, 1:] -= cost.gamma[0] * cost.SS + cost.lap_diag[idx, None, None] * cost.BB
+    cov[idx] = expected_error(data / scale, grad[idx] / scale[:, :, 0], A[idx], prior)
+    var = _spectral_var(B, cov[:, 1:, 1:]) + prior.truncation_var
     pos = np.sqrt(np.maximum(cov[:, 0, 0], 0.0))
     pos[fixed] = np.nan
     return VertexUncertainty(

@@ -173,9 +173,8 @@ def optimiser_input(front: FrontResult, session: Session, basis: SpectralBasis) 
     names = sorted({k[1] for k in keys})
     camera, spds = session_spectra(session, names)
     responses = np.stack([response_matrix(camera, spds[n]) for n in names])
-    # Filled in place: a list of frames stacked then cast held the frames three times over.
-    # float16 as the decode cache keeps them (its rounding is far below sensor noise): half the
-    # largest array of the solve (0.23 GB at 80 frames of 800×600); samples are float64.
+    # Filled in place (stacking a list would hold the frames three times over), in float16 as
+    # the decode cache keeps them: half the solve's largest array; samples are float64.
     first = lit_frame(front, keys[0])
     h, w = first[0].shape[:2]
     images = np.empty((len(keys), h, w, 3), dtype=np.float16)
@@ -340,8 +339,7 @@ def export_result(
 
 # Below this ratio of the farthest to the nearest camera distance the light's distance on the
 # camera plate trades against the reflectance scale (all views see the same inverse-square
-# falloff): on the sim's torus at one 0.55 m ring the offset ended 22 mm out along the optical
-# axis, with views stepping between 0.35 and 0.65 m 3 mm (docs/usage-reconstruct.md).
+# falloff; docs/usage-reconstruct.md).
 MIN_DISTANCE_RATIO = 1.3
 
 

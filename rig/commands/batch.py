@@ -3,15 +3,20 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rich.console import Console
 
-from core.errors import RigError
+from core.errors import MissingDependencyError, RigError
 from reconstruct.run.pipeline import load_config
 from rig.commands.reconstruct import EXIT_SKIPPED_FRAMES
 from rig.outpaths import output_file
 from rig.warmup import compile_kernels_once
+
+if TYPE_CHECKING:
+    from rig.batch.task import Outcome
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -65,8 +70,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=handle)
 
 
+def _run_batch() -> Callable[..., list[Outcome]]:
+    """The Dask runner, imported only for this command: Dask is the `batch` extra."""
+    try:
+        from rig.batch.run import run_batch
+    except ModuleNotFoundError as exc:
+        if (exc.name or "").split(".")[0] not in ("dask", "distributed"):
+            raise
+        raise MissingDependencyError(
+            "Dask distributed", "batch", "rig batch runs its sessions on a Dask cluster"
+        ) from exc
+    return run_batch
+
+
 def handle(args: argparse.Namespace) -> int:
-    from rig.batch.run import run_batch  # Dask loads only for this command
+    run_batch = _run_batch()
     from rig.batch.sessions import collect
     from rig.batch.summary import table, write_csv
 

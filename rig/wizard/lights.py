@@ -142,7 +142,7 @@ def plot_light(light: MeasuredLight, values: np.ndarray, plots: Path, version: i
     from calibration.plots import plot_spectrum
 
     slug = "".join(c if c.isalnum() or c in "-_." else "-" for c in light.entry)
-    unit = "scaled to DESIGN.md units" if light.scale else "relative"
+    unit = "scaled to the forward model's units" if light.scale else "relative"
     return plot_spectrum(
         light.wavelengths,
         values[:, None],

@@ -103,10 +103,10 @@ def test_the_child_fills_an_empty_numba_cache(tmp_path: Path):
     subprocess.run(warmup.CHILD, env=env, check=True, capture_output=True, timeout=900)
     cached = {p.name.split("-")[0] for p in cache.rglob("*.nbi")}
     for kernel in (
-        "kernels.gram_products",
-        "kernels.accumulate_normal_equations",
-        "kernels._sample_bilinear",
-        "kernels.solve_vertex_blocks",
+        "normal_equations.gram_products",
+        "normal_equations.accumulate_normal_equations",
+        "sampling._sample_bilinear",
+        "preconditioner.solve_vertex_blocks",
         "plane_cost.sweep",
         "board_silhouette._ground_coverage",
     ):

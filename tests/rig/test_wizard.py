@@ -1,5 +1,5 @@
 """The calibration wizard on the simulated rig writes a store that reproduces the sim's true
-light SPDs in DESIGN.md units, and a capture can use it."""
+light SPDs in the forward model's units, and a capture can use it."""
 
 from __future__ import annotations
 

@@ -81,7 +81,7 @@ def test_render_of_plane_matches_analytic_model_and_dng_decodes_to_it(
     assert frame.paths == (tmp_path / "plane.dng",)
     s = cam.sensor
     gain = s.exposure_s * s.iso / 100
-    y = decode(frame.paths[0]).astype(float) / 65535 / gain  # DESIGN.md's linear values
+    y = decode(frame.paths[0]).astype(float) / 65535 / gain  # linear values (docs/architecture.md)
     resid = (y - expect)[inside]
     # Unbiased: per-channel mean relative error well under 1 %.
     np.testing.assert_allclose(resid.mean(0) / expect[inside].mean(0), 0.0, atol=3e-3)

@@ -13,7 +13,8 @@ from drivers.sim import SimRig
 from reconstruct.frames.ambient import exposure_ratio, subtract_ambient
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.problem import Frames
-from reconstruct.optimise.steps import OptimiseSettings, build_problem
+from reconstruct.optimise.problem_setup import build_problem
+from reconstruct.optimise.steps import OptimiseSettings
 from reconstruct.optimise.synthetic import SyntheticScene, make_scene
 
 

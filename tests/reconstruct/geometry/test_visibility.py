@@ -10,11 +10,8 @@ import trimesh
 from reconstruct.geometry.visibility import (
     Visibility,
     compute_visibility,
-    pair_shadow_mask,
-    shadow_mask,
 )
 from reconstruct.model.camera import Intrinsics, Pose
-from reconstruct.model.raycast import RayCaster
 
 
 def _scene() -> tuple[trimesh.Trimesh, int]:
@@ -66,19 +63,3 @@ def test_out_of_frustum_is_not_visible() -> None:
     pose = Pose.look_at(np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]), up=(0.0, 1.0, 0.0))
     vis = compute_visibility(mesh, {0: intr}, {0: pose})
     assert vis.counts().sum() == 0
-
-
-def test_shadow_masks() -> None:
-    mesh, n_back = _scene()
-    caster = RayCaster(mesh.vertices, mesh.faces)
-    v, n = np.asarray(mesh.vertices), np.asarray(mesh.vertex_normals)
-    top = np.flatnonzero((np.arange(len(v)) < n_back) & (v[:, 2] > 0.099))
-    lights = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.2]])
-    m = shadow_mask(caster, v[top], n[top], lights)
-    assert not m[:, 0].any()  # the small sphere casts its shadow on the top
-    assert m[:, 1].all()
-    intr = Intrinsics.pinhole(200, 200, 300.0)
-    side = Pose.look_at(np.array([1.0, 0.0, 0.3]), np.zeros(3))
-    vis = compute_visibility(mesh, {0: intr}, {0: side})
-    lit = pair_shadow_mask(caster, v, n, vis, {0: side.center})
-    assert lit.shape == vis.indices.shape and lit.all()  # light at the camera: no shadow seen

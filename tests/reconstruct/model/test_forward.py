@@ -155,9 +155,10 @@ def test_projector_lights_only_its_pattern() -> None:
     pattern = np.zeros((24, 32, 3))
     pattern[:, :16, 0] = 1.0  # left half red primary only
     resp = [np.eye(3)[k][:, None] * np.ones((1, N_L)) for k in range(3)]
-    img, _ = render.render_projector_image(
-        v, f, refl, intr, pose, pattern, proj_intr, proj_pose, resp, supersample=1
-    )
+    caster = RayCaster(v, f)
+    hits = render.trace_view(caster, intr, pose, 1)
+    w = render.projector_weights(caster, hits, pattern, proj_intr, proj_pose)
+    img = render.shade(hits, [(w[:, k], resp[k]) for k in range(3)], refl)
     # Camera and projector share the pose and the image is twice the size: left half red.
     assert img[:, :30, 0].min() > 0 and img[:, 34:].max() == 0.0
     assert img[..., 1:].max() == 0.0

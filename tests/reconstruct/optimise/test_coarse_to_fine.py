@@ -77,5 +77,5 @@ def test_start_several_pixels_off_converges_only_coarse_to_fine() -> None:
         stages = [h["stage"] for h in res.history if h["iteration"] == 0]
         assert stages == ["light"] + ["coarse"] * (2 if blur else 0) + ["joint"] * 2
     assert after[0.0] > 0.55 * before  # measured 0.72: stuck
-    assert after[4.0] < 0.45 * before  # measured 0.44 (0.45 with `preconditioner: amg`)
+    assert after[4.0] < 0.45 * before
     assert after[4.0] < 0.7 * after[0.0]

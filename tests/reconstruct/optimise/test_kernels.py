@@ -5,17 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reconstruct.optimise.kernels import (
+from reconstruct.optimise.kernels.cg import cg_direction, cg_step, project_to_stage
+from reconstruct.optimise.kernels.preconditioner import (
     back_substitute_light,
-    cg_direction,
-    cg_step,
     coupling_transpose_product,
     damped_block_inverses,
     expand_positions,
-    project_to_stage,
-    rendered_error,
     solve_vertex_blocks,
 )
+from reconstruct.optimise.kernels.rendering import rendered_error
 
 
 def _spd_blocks(rng: np.random.Generator, n: int, size: int) -> np.ndarray:

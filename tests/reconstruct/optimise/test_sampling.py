@@ -7,13 +7,14 @@ import pytest
 from scipy.ndimage import map_coordinates
 
 from reconstruct.model.camera import Intrinsics, Pose
+from reconstruct.optimise.kernels.sampling import project_points
 from reconstruct.optimise.sampling import (
     bilinear,
     bilinear_taps,
-    project_with_jacobian,
     sample_pairs,
     sample_taps,
     taps_valid,
+    view_cameras,
 )
 
 
@@ -60,7 +61,8 @@ def test_projection_jacobian_with_distortion() -> None:
     pose = Pose.look_at(np.array([0.4, -0.3, 0.2]), np.zeros(3))
     rng = np.random.default_rng(2)
     x = 0.05 * rng.normal(size=(5, 3))
-    uv, duv = project_with_jacobian(intr, pose, x)
+    idx = np.arange(len(x))
+    uv, duv = project_points(x, idx, np.zeros_like(idx), *view_cameras([intr], [pose]), True)
     assert np.allclose(uv, intr.project_camera(pose.to_camera(x)))
     h = 1e-7
     for k in range(3):
@@ -106,7 +108,7 @@ def test_compiled_sampler_matches_the_numpy_one(dtype: type) -> None:
     """The cost samples through ``kernels.sample_bilinear`` (taps per pair, frames per
     observation); it must give the same values and gradients as :func:`sample_taps`, for the
     float16 frames of the pipeline (read by bit pattern) as for float32/64."""
-    from reconstruct.optimise.kernels import sample_bilinear
+    from reconstruct.optimise.kernels.sampling import sample_bilinear
 
     rng = np.random.default_rng(3)
     images = rng.uniform(size=(4, 9, 11, 3)).astype(dtype)

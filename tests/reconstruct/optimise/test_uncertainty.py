@@ -11,7 +11,8 @@ from scipy.stats import spearmanr
 from calibration.basis import default_basis, pca_basis
 from calibration.defaults import training_reflectances
 from reconstruct.optimise.cost import JointCost
-from reconstruct.optimise.steps import OptimiseSettings, build_problem, optimise
+from reconstruct.optimise.problem_setup import build_problem
+from reconstruct.optimise.steps import OptimiseSettings, optimise
 from reconstruct.optimise.synthetic import SyntheticScene, make_scene
 from reconstruct.optimise.uncertainty import (
     ReflectancePrior,
@@ -28,7 +29,8 @@ def _at_truth(scene: SyntheticScene) -> VertexUncertainty:
     light = scene.light_offset[None]
     problem = build_problem(scene.input(), scene.vertices, light, OptimiseSettings())
     theta = problem.pack(scene.vertices, scene.alpha, light)
-    return vertex_uncertainty(JointCost(problem), theta, problem.obs.per_vertex > 0)
+    prior = reflectance_prior(scene.basis)
+    return vertex_uncertainty(JointCost(problem), theta, problem.obs.per_vertex > 0, prior)
 
 
 @pytest.fixture(scope="module")
@@ -46,8 +48,8 @@ def test_noise_level_is_read_from_the_residuals_and_scales_the_std(noisy):
     inflation = np.sqrt(m3 / a.dof)
     assert a.noise_std == pytest.approx(0.002 * inflation, rel=0.1)
     assert b.noise_std == pytest.approx(0.004 * inflation, rel=0.1)
-    ok = np.isfinite(a.reflectance_std[:, 0])
-    ratio = b.reflectance_std[ok] / a.reflectance_std[ok]
+    ok = np.isfinite(a.reflectance_std_gn[:, 0])
+    ratio = b.reflectance_std_gn[ok] / a.reflectance_std_gn[ok]
     # twice the noise: at least twice the std (noisier colours also loosen the photometric
     # smoothness weights, so a little more)
     assert np.median(ratio) >= 0.95 * b.noise_std / a.noise_std
@@ -59,13 +61,14 @@ def test_unobserved_vertices_have_no_uncertainty_and_more_views_mean_less(noisy)
     light = scene.light_offset[None]
     problem = build_problem(scene.input(), scene.vertices, light, OptimiseSettings())
     count = problem.obs.per_vertex
-    assert unc.reflectance_std.shape == scene.reflectance.shape
+    assert unc.reflectance_std_gn is not None
+    assert unc.reflectance_std.shape == unc.reflectance_std_gn.shape == scene.reflectance.shape
     assert unc.position_std_m.shape == (len(scene.vertices),)
-    assert np.all(np.isnan(unc.reflectance_std[count == 0]))
+    assert np.all(np.isnan(unc.reflectance_std_gn[count == 0]))
     seen = count > 0
-    assert np.all(np.isfinite(unc.reflectance_std[seen]))
+    assert np.all(np.isfinite(unc.reflectance_std_gn[seen]))
     assert np.all(unc.position_std_m[seen] > 0)
-    rho = spearmanr(count[seen], unc.reflectance_std[seen].mean(axis=1)).statistic
+    rho = spearmanr(count[seen], unc.reflectance_std_gn[seen].mean(axis=1)).statistic
     assert rho < -0.3
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import shutil
+import sys
 from pathlib import Path
 
 import pytest
@@ -109,3 +110,14 @@ def test_a_scheduler_with_multi_threaded_workers_is_refused() -> None:
         with pytest.raises(RigError, match="--nthreads 1"):
             with open_client(scheduler=cluster.scheduler_address):
                 pass
+
+
+def test_without_dask_batch_says_what_to_install(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setitem(sys.modules, "distributed", None)  # imports of it fail: not installed
+    for name in ("rig.batch.run", "rig.batch.cluster"):
+        monkeypatch.delitem(sys.modules, name, raising=False)
+    assert main(["batch", str(tmp_path)]) == 2
+    err = capfd.readouterr().err
+    assert "pip install 'spectral-rig[batch]'" in err and len(err.strip().splitlines()) == 1

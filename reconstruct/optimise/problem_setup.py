@@ -1,0 +1,141 @@
+"""The solve's problem at the current estimate: the observation set (visibility, image
+bounds, grazing angles, shadows by ray casting to the current lights), its frozen weights, and
+the reflectance a solve starts from."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from calibration.basis import SpectralBasis
+from calibration.estimation import estimate_reflectance
+from core.errors import RigError
+from reconstruct.model.forward import shading
+from reconstruct.model.raycast import RayCaster
+from reconstruct.optimise.cost import JointCost
+from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
+from reconstruct.optimise.problem import LightMode, Observations, Problem, Rig, Weights
+from reconstruct.optimise.sampling import sample_pairs, taps_valid
+from reconstruct.optimise.weights import edge_scale, photometric_weights
+
+if TYPE_CHECKING:
+    from reconstruct.optimise.steps import OptimiseInput, OptimiseSettings, SettingsLightMode
+
+
+def problem_mode(mode: SettingsLightMode) -> LightMode:
+    """How a solve parameterises the light: fixed lights are per-view positions kept out of
+    the optimised set."""
+    return "offset" if mode == "offset" else "free"
+
+
+def light_positions(rig: Rig, mode: SettingsLightMode, light: np.ndarray) -> np.ndarray:
+    light = np.asarray(light, dtype=float).reshape(-1, 3)
+    if mode != "offset":
+        return light
+    return np.stack([pose.light_position(light[0]) for pose in rig.poses])
+
+
+def build_problem(
+    inp: OptimiseInput, X: np.ndarray, light: np.ndarray, cfg: OptimiseSettings
+) -> Problem:
+    """The observation set and frozen weights at the current estimate (see module doc)."""
+    n = len(X)
+    normals, _ = vertex_normals(X, inp.faces)
+    P = light_positions(inp.rig, cfg.light_mode, light)
+    fr = inp.frames
+    if inp.visibility.shape != (n, inp.rig.n_views):
+        raise RigError(
+            f"visibility has shape {inp.visibility.shape}, expected ({n}, {inp.rig.n_views})",
+            "give one column per view of the poses",
+        )
+    verts, frame_ids = [], []
+    for f in range(fr.count):
+        vis = np.flatnonzero(inp.visibility[:, fr.view[f]])
+        verts.append(vis)
+        frame_ids.append(np.full(vis.size, f, dtype=np.int64))
+    vertex = np.concatenate(verts) if verts else np.zeros(0, np.int64)
+    frame = np.concatenate(frame_ids) if frame_ids else np.zeros(0, np.int64)
+    view = fr.view[frame]
+    keep = np.ones(vertex.size, dtype=bool)
+    observed = np.zeros((vertex.size, 3))
+    if inp.observed is not None:
+        observed = inp.observed[vertex, frame]
+        keep &= np.all(np.isfinite(observed), axis=1)
+    else:
+        assert fr.images is not None and fr.valid is not None
+        for c in range(inp.rig.n_views):
+            idx = np.flatnonzero(view == c)
+            if idx.size == 0:
+                continue
+            uv = inp.rig.intrinsics[c].project_camera(inp.rig.poses[c].to_camera(X[vertex[idx]]))
+            keep[idx] &= taps_valid(fr.valid, frame[idx], uv, cfg.margin_px)
+            observed[idx] = sample_pairs(fr.images, frame[idx], np.arange(idx.size), uv, False)[0]
+    s = shading(X[vertex], normals[vertex], P[view])
+    keep &= s > 0
+    centres = np.stack([pose.center for pose in inp.rig.poses])
+    to_cam = centres[view] - X[vertex]
+    cos_view = np.einsum("ij,ij->i", normals[vertex], to_cam) / np.linalg.norm(to_cam, axis=1)
+    keep &= cos_view >= cfg.min_view_cos
+    # Shadow masks: one ray per distinct (vertex, view), shared by that view's illuminations.
+    pair = vertex * inp.rig.n_views + view
+    upair, inverse = np.unique(pair[keep], return_inverse=True)
+    pv, pc = upair // inp.rig.n_views, upair % inp.rig.n_views
+    blocked = RayCaster(X, inp.faces).occluded(X[pv], P[pc], cfg.shadow_eps, normals[pv])
+    lit = np.ones(vertex.size, dtype=bool)
+    lit[np.flatnonzero(keep)] = ~blocked[inverse]
+    keep &= lit
+    fixed = observed[keep] if inp.observed is not None else None
+    obs = Observations.build(vertex[keep], frame[keep], fr, n, fixed)
+    adj = adjacency(inp.faces, n)
+    e = edges(adj)
+    order = np.lexsort((frame[keep], view[keep], vertex[keep]))
+    w = photometric_weights(
+        e,
+        obs.vertex,
+        obs.illumination,
+        observed[keep][order],
+        s[keep][order],
+        n,
+        inp.rig.responses.shape[0],
+        cfg.sigma_chroma,
+        cfg.sigma_intensity,
+    )
+    weights = Weights(cfg.gamma, e, w, edge_scale(X, adj), cfg.rendering_scale)
+    return Problem(
+        inp.faces, n, inp.basis.B, inp.rig, fr, obs, weights, problem_mode(cfg.light_mode)
+    )
+
+
+def initial_reflectance(
+    problem: Problem, theta: np.ndarray, basis: SpectralBasis, smoothness: float
+) -> np.ndarray:
+    """α from the calibration module's 2-D estimate, per vertex, with the current shading:
+    each (vertex, illumination)'s observations are pooled by least squares into one RGB and a
+    shading weight; vertices never observed get the mean α."""
+    cost = JointCost(problem)
+    X, A, light = problem.unpack(theta)
+    normals, _ = vertex_normals(X, problem.faces)
+    st = cost.render(X, A, light, normals, derivatives=False)
+    o = problem.obs
+    s = st.pair_s[cost.obs_pair]
+    y_obs = s[:, None] * st.colours[o.illumination, o.vertex] - st.error
+    n, k = problem.n_vertices, problem.rig.responses.shape[0]
+    s2 = np.zeros((n, k))
+    sy = np.zeros((n, k, 3))
+    np.add.at(s2, (o.vertex, o.illumination), s**2)
+    np.add.at(sy, (o.vertex, o.illumination), s[:, None] * y_obs)
+    seen = s2 > 0
+    root = np.sqrt(s2)
+    rgb = np.full((n, k, 3), np.nan)
+    rgb[seen] = sy[seen] / root[seen][:, None]  # = root · (Σ s y / Σ s²)
+    alpha = np.full((n, basis.n_components), np.nan)
+    rows = np.flatnonzero(seen.any(axis=1))
+    if rows.size:
+        alpha[rows], _ = estimate_reflectance(
+            rgb[rows], problem.rig.responses, basis, smoothness, shading=root[rows]
+        )
+    good = np.all(np.isfinite(alpha), axis=1)
+    fill = alpha[good].mean(axis=0) if good.any() else basis.project(np.full(basis.B.shape[0], 0.5))
+    alpha[~good] = fill
+    return alpha
