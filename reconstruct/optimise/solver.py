@@ -15,11 +15,13 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager, nullcontext
 from dataclasses import dataclass, field
+from typing import Literal, get_args
 
 import numpy as np
 import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
+from core.config import bounded
 from reconstruct.optimise.cost import JointCost, Linearisation
 from reconstruct.optimise.kernels import (
     back_substitute_light,
@@ -34,30 +36,34 @@ from reconstruct.optimise.kernels import (
 )
 from reconstruct.optimise.multilevel import CoarseOperator, patch_bumps
 
-PRECONDITIONERS = ("block", "two_level", "amg")
+Preconditioner = Literal["block", "two_level", "amg"]
+PRECONDITIONERS = get_args(Preconditioner)
 _NO_DIRECTIONS = np.empty((0, 3))  # free motion
 _NO_DAMPING = np.empty(0)
 
 
 @dataclass
 class SolverSettings:
-    max_iterations: int = 30
-    function_tolerance: float = 1e-4  # stop when a step lowers the cost by less than this share
+    max_iterations: int = bounded(30, min=0, max=10_000)
+    # stop when a step lowers the cost by less than this share
+    function_tolerance: float = bounded(1e-4, min=0.0, max=1.0)
     # Stop when a step is rejected (backtracking included) right after one that lowered the
     # cost by less than this share: the quadratic model no longer predicts the cost, and the
     # retry at a higher λ costs a full CG solve for less than that gain (real size: the last
     # joint stage spent 45 s on two rejections and a 0.02 % step).
-    stall_tolerance: float = 2e-3
-    step_tolerance: float = 1e-9  # stop when |δ| <= tol · (|θ| + tol)
-    initial_lambda: float = 1e-3
-    cg_tolerance: float = 1e-2  # inner solve relative residual (CG is cheap next to linearising)
+    stall_tolerance: float = bounded(2e-3, min=0.0, max=1.0)
+    step_tolerance: float = bounded(1e-9, min=0.0, max=1.0)  # stop when |δ| <= tol · (|θ| + tol)
+    initial_lambda: float = bounded(1e-3, min=0.0, max=1e12)
+    # inner solve relative residual (CG is cheap next to linearising)
+    cg_tolerance: float = bounded(1e-2, min=0.0, max=1.0)
     # Nash's truncated-Newton test (Ceres's `eta`): CG also stops at iteration i once
     # i (Q_i − Q_{i−1}) / Q_i < this, Q the quadratic model; 0 = off (the default). 0.01: CG
     # 38 -> 28 its per step, 100k bench −13 % CPU, but from the real-size front accuracy
     # 0.1710 -> 0.1724 mm (0.03: 0.1743 mm) while the cost falls lower (bench/README.md).
-    cg_model_tolerance: float = 0.0
-    cg_max_iterations: int = 50
-    backtracking_steps: int = 2  # halvings of a rejected step tried before λ grows
+    cg_model_tolerance: float = bounded(0.0, min=0.0, max=1.0)
+    cg_max_iterations: int = bounded(50, min=1, max=100_000)
+    # halvings of a rejected step tried before λ grows
+    backtracking_steps: int = bounded(2, min=0, max=100)
     # "block": the per-vertex block preconditioner; "two_level": plus a coarse correction by
     # patches of vertices moving together (multilevel.py), seeds `coarse_hops` edges apart;
     # "amg": plus the whole position block, solved by an algebraic-multigrid V-cycle, where
@@ -68,8 +74,8 @@ class SolverSettings:
     # accurate on two scenes and slightly less on two (real size: accuracy +0.8 %); 14 % less
     # CPU at 100k on the bench scene for the same wall time, slower on the real-size capture
     # (bench/README.md).
-    preconditioner: str = "block"
-    coarse_hops: int = 4
+    preconditioner: Preconditioner = "block"
+    coarse_hops: int = bounded(4, min=1, max=1000)
     # Keep large freed blocks in the heap during the solve (glibc): −16 % time, +8 % peak RSS
     # at 100k vertices (bench/README.md); False returns every freed block at once.
     keep_freed_memory: bool = True
