@@ -32,10 +32,11 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import inspect
 import math
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, Literal, TypeVar, Union
 
 from core.errors import RigError
@@ -46,6 +47,7 @@ T = TypeVar("T")
 def bounded(
     default: Any = dataclasses.MISSING,
     *,
+    default_factory: Callable[[], Any] | Any = dataclasses.MISSING,
     min: float | None = None,
     max: float | None = None,
     above: float | None = None,
@@ -53,10 +55,12 @@ def bounded(
 ) -> Any:
     """A dataclass field with bounds: every number the field holds (itself, or each item of a
     tuple or dict) must be in ``[min, max]`` and ``> above``; a tuple or dict must have at least
-    ``min_items`` items. Without ``default`` the key is required."""
+    ``min_items`` items. Without ``default`` or ``default_factory`` the key is required."""
     meta = {"min": min, "max": max, "above": above, "min_items": min_items}
     return dataclasses.field(
-        default=default, metadata={k: v for k, v in meta.items() if v is not None}
+        default=default,
+        default_factory=default_factory,
+        metadata={k: v for k, v in meta.items() if v is not None},
     )
 
 
@@ -89,6 +93,45 @@ def from_mapping(cls: type[T], data: Any, where: str, key: str = "") -> T:
             allowed = describe(hints[f.name], f.metadata)
             raise RigError(f"{where}: key '{path}' is missing", f"allowed: {allowed}")
     return cls(**values)
+
+
+def check_arguments(func: Callable[..., Any], options: Mapping[str, Any], where: str,
+                    skip: int = 0) -> None:
+    """``options`` checked as keyword arguments of ``func`` after its first ``skip`` parameters
+    (a driver's settings from a profile): unknown names rejected with the nearest known one,
+    required ones present, and each value against its annotation where that is a config type
+    (bool, numbers, str, ``Literal``, containers and unions of those); ``func`` checks the
+    rest."""
+    params = list(inspect.signature(func).parameters.values())[skip:]
+    named = [p for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+    names = [p.name for p in named]
+    if not any(p.kind is p.VAR_KEYWORD for p in params):
+        for name in options:
+            if name not in names:
+                close = difflib.get_close_matches(str(name), names, n=1)
+                hint = f" (did you mean '{close[0]}'?)" if close else ""
+                raise RigError(f"{where}: key '{name}' is not known{hint}",
+                               f"allowed: {', '.join(names)}")
+    for p in named:
+        if p.default is p.empty and p.name not in options:
+            raise RigError(f"{where}: key '{p.name}' is missing", "add it to the section")
+    try:
+        init = func.__init__ if isinstance(func, type) else func  # type: ignore[misc]
+        hints = typing.get_type_hints(init)
+    except (NameError, TypeError):  # an annotation this module cannot resolve: func checks
+        hints = {}
+    for name, value in options.items():
+        if name in hints and _checkable(hints[name]):
+            parse_value(value, hints[name], where, name)
+
+
+def _checkable(kind: Any) -> bool:
+    """Whether :func:`parse_value` understands ``kind`` without converting a YAML value."""
+    if kind in (bool, int, float, str, type(None), Any) or typing.get_origin(kind) is Literal:
+        return True
+    if typing.get_origin(kind) in (Union, types.UnionType, tuple, list, dict, Mapping):
+        return all(_checkable(a) for a in typing.get_args(kind) if a is not Ellipsis)
+    return False
 
 
 def parse_value(
@@ -136,7 +179,7 @@ def _parse(value: Any, kind: Any, where: str, key: str, meta: Mapping[str, Any])
             return value
         raise _Mismatch
     if dataclasses.is_dataclass(kind) and isinstance(kind, type):
-        if isinstance(value, (Mapping, kind)):
+        if value is None or isinstance(value, (Mapping, kind)):  # an empty YAML section: None
             return from_mapping(kind, value, where, key)
         raise _Mismatch
     if origin in (tuple, list) or origin is typing.Sequence:
@@ -210,7 +253,7 @@ def describe(kind: Any, meta: Mapping[str, Any] | None = None) -> str:
         parts = [describe(a, meta) for a in args if a is not type(None)]
         return " or ".join(parts + (["null"] if type(None) in args else []))
     if origin is Literal:
-        return ", ".join(_show(a) for a in args)
+        return ", ".join(a if isinstance(a, str) else _show(a) for a in args)
     if kind is bool:
         return "true or false"
     if kind is int or kind is float:
@@ -248,8 +291,8 @@ def _range(meta: Mapping[str, Any]) -> str:
 
 
 def _fail(where: str, key: str, value: Any, allowed: str) -> RigError:
-    name = key or "(top level)"
-    return RigError(f"{where}: key '{name}' is {_show(value)}", f"allowed: {allowed}")
+    what = f"{where}: key '{key}'" if key else where
+    return RigError(f"{what} is {_show(value)}", f"allowed: {allowed}")
 
 
 def _join(key: str, name: str) -> str:
