@@ -25,7 +25,9 @@ core.errors.RigError: run.yaml: key 'kinds' is not known (did you mean 'kind'?) 
 Traceback (most recent call last):
 core.errors.RigError: run.yaml: key 'max_iterations' is True — allowed: a whole number in [1, ...
 
-A nested dataclass field takes a nested mapping, and its errors carry the longer key path.
+A nested dataclass field takes a nested mapping, and its errors carry the longer key path
+(``tests/core/test_config.py`` runs these examples). :func:`check_arguments` applies the same
+checks to a function's keyword arguments (a driver's settings in a profile).
 """
 
 from __future__ import annotations
