@@ -255,6 +255,8 @@ def relight(*args: str) -> Callable[[Path], list[str]]:
         (tmp / "adir").mkdir(exist_ok=True)
         write(tmp / "cam.yaml", "width: 64\nheight: 48\nwidth: 32\n")
         write(tmp / "bin.yaml", BINARY)
+        write(tmp / "far.yaml", "width: 64\nheight: 48\nfocal_px: long\neye: [1, 0, 0]\n"
+              "target: [0, 0, 0]\n")
         return ["relight", str(tmp / "s"), *(a.replace("TMP", str(tmp)) for a in args)]
 
     return make
@@ -274,6 +276,8 @@ RELIGHT = [
     Case("relight-camera-duplicate", relight("--camera", "TMP/cam.yaml"),
          r"cam\.yaml.*duplicate key 'width'"),
     Case("relight-camera-binary", relight("--camera", "TMP/bin.yaml"), r"bin\.yaml"),
+    Case("relight-camera-focal-word", relight("--camera", "TMP/far.yaml"),
+         r"far\.yaml: key 'focal_px' is 'long'"),
     Case("relight-no-recon", relight("--view", "0"), r"reflectance\.npz"),
     Case("relight-no-view-or-camera", relight(), r"--view"),
 ]
