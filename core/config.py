@@ -184,7 +184,7 @@ def _parse(value: Any, kind: Any, where: str, key: str, meta: Mapping[str, Any])
         if value is None or isinstance(value, (Mapping, kind)):  # an empty YAML section: None
             return from_mapping(kind, value, where, key)
         raise _Mismatch
-    if origin in (tuple, list) or origin is typing.Sequence:
+    if origin in (tuple, list):
         return _sequence(value, args, where, key, meta)
     if origin in (dict, Mapping) or kind in (dict, Mapping):
         return _mapping(value, args, where, key, meta)
