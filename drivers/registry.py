@@ -7,11 +7,11 @@ simulated world through it).
 from __future__ import annotations
 
 import importlib
-import inspect
 import logging
 from collections.abc import Callable, Mapping
 from typing import Any
 
+from core.config import check_arguments
 from core.errors import RigError
 from drivers.device_set import DeviceSet
 from drivers.lights.k8062 import K8062_PID, VELLEMAN_VID
@@ -93,15 +93,10 @@ def _transport(driver: str, options: dict[str, Any]) -> Transport:
 def _build(
     kind: str, driver: str, cls: Callable[..., Any], options: dict[str, Any], *args: Any
 ) -> Any:
-    """``cls(*args, **options)``, with unknown or missing profile keys reported as such."""
+    """``cls(*args, **options)``, the profile's ``options`` checked against ``cls``'s
+    annotations first (unknown, missing or mistyped keys are a RigError naming the key)."""
     log.debug("opening %s driver %s with %s", kind, driver, redact(options))
-    try:
-        inspect.signature(cls).bind(*args, **options)
-    except TypeError as error:
-        raise RigError(
-            f"{kind} driver {driver!r}: unexpected or missing setting ({error})",
-            "see docs/usage-drivers.md for the keys this driver takes",
-        ) from error
+    check_arguments(cls, options, f"{kind} driver {driver!r}", skip=len(args))
     return cls(*args, **options)
 
 

@@ -9,60 +9,23 @@ path.
 from __future__ import annotations
 
 import copy
-import difflib
-import importlib
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
+from core.config import bounded, from_mapping, parse_value
 from core.errors import RigError
 from core.labels import is_reserved
 from core.yamlio import read_yaml
-from drivers.registry import GROUND_TRUTH_DRIVERS
+from drivers.registry import DRIVERS, GROUND_TRUTH_DRIVERS
 from reconstruct.poses.board import BoardSpec
 
 DEVICE_KINDS = ("light", "camera", "projector", "spectrometer")
 # Drivers the capture routes itself; the rest go to ``drivers.registry``.
-LOCAL_DRIVERS: dict[str, tuple[str, ...]] = {
-    "light": ("manual",),
-    "camera": (),
-    "projector": (),
-    "spectrometer": (),
-}
-MOUNT_TYPES = ("plate", "free")
-POSE_MODES = ("estimate", "known")
-TOP_KEYS = (
-    "name",
-    "description",
-    "devices",
-    "camera_settings",
-    "light_mount",
-    "illuminations",
-    "plan",
-    "calibration",
-    "known_distances",
-    "poses",
-    "sim",
-    "board",
-)
-PLAN_KEYS = (
-    "views",
-    "illuminations",
-    "ambient",
-    "structured_light",
-    "settle_s",
-    "trajectory",
-    "projector",
-)
-PROJECTOR_PLAN_KEYS = ("placements", "views_per_placement")
-TRAJECTORY_KEYS = ("elevations_deg", "azimuth_start_deg", "distance_factors")
-STRUCTURED_KEYS = ("gray_code",)
-CALIBRATION_KEYS = ("store", "camera", "lights")
-DISTANCE_KEYS = ("light_offset_m", "scale_bar_m", "camera_pairs")
-MOUNT_KEYS = ("type", "offset_m")
+MAX_VIEWS = 1000  # more than any turntable or handheld session takes
 
 
 @dataclass(frozen=True)
@@ -71,17 +34,21 @@ class StructuredLight:
     shown full-field by the projector when the rig has no separate light): Gray-code stripes,
     columns and rows, each with its inverse, plus all-white and all-black references."""
 
-    gray_code: bool
+    gray_code: bool = True
 
 
 @dataclass(frozen=True)
 class ProjectorPlacements:
-    """The projector stands on its own at ``count`` placements; at each the camera takes
+    """The projector stands on its own at ``placements`` placements; at each the camera takes
     ``views_per_placement`` views (camera and projector moved alternately), so views lit
     from one placement can be matched through the projector's code."""
 
-    count: int
-    views_per_placement: int
+    placements: int = bounded(min=1, max=MAX_VIEWS)
+    views_per_placement: int = bounded(0, min=0, max=MAX_VIEWS)  # 0: plan.views / placements
+
+    @property
+    def count(self) -> int:
+        return self.placements
 
     def of_view(self, view: int) -> int:
         return view // self.views_per_placement
@@ -94,9 +61,9 @@ class Trajectory:
     how far to step in or out relative to the usual distance — views at different distances
     are what let the reconstruction tell the light's distance from the reflectance scale."""
 
-    elevations_deg: tuple[float, ...] = (20.0, 45.0)
-    azimuth_start_deg: float = 0.0
-    distance_factors: tuple[float, ...] = ()
+    elevations_deg: tuple[float, ...] = bounded((20.0, 45.0), min=-90, max=90, min_items=1)
+    azimuth_start_deg: float = bounded(0.0, min=-360, max=360)
+    distance_factors: tuple[float, ...] = bounded((), above=0, max=10)
 
     def distance_factor(self, view: int) -> float | None:
         """Planned distance of ``view`` relative to the usual one; None: no plan."""
@@ -116,11 +83,14 @@ class Trajectory:
 
 @dataclass(frozen=True)
 class Plan:
-    views: int
-    illuminations: tuple[str, ...]
+    """``illuminations``: names from the profile's ``illuminations`` (``all``, the default:
+    every one, in order)."""
+
+    views: int = bounded(min=1, max=MAX_VIEWS)
+    illuminations: tuple[str, ...] = bounded((), min_items=1)
     ambient: bool = False
     structured_light: StructuredLight | None = None
-    settle_s: float = 0.0
+    settle_s: float = bounded(0.0, min=0, max=3600)
     trajectory: Trajectory = field(default_factory=Trajectory)
     projector: ProjectorPlacements | None = None  # None: the projector rides on the plate
 
@@ -130,8 +100,8 @@ class LightMount:
     """``plate``: light rigidly on the camera plate at ``offset_m`` (camera frame, metres);
     ``free``: a separate light per view."""
 
-    type: str
-    offset_m: tuple[float, float, float] | None = None
+    type: Literal["plate", "free"] = "plate"
+    offset_m: tuple[float, float, float] | None = bounded(None, min=-10, max=10)
 
 
 @dataclass(frozen=True)
@@ -139,21 +109,59 @@ class CameraPair:
     """A measured distance between the camera centres of two views (a metric scale for the
     reconstruction)."""
 
-    view_a: int
-    view_b: int
-    metres: float
+    views: tuple[int, int] = bounded(min=0, max=MAX_VIEWS)
+    metres: float = bounded(above=0, max=1000)
 
     def as_dict(self) -> dict[str, Any]:
-        return {"views": [self.view_a, self.view_b], "metres": self.metres}
+        return {"views": list(self.views), "metres": self.metres}
+
+
+@dataclass(frozen=True)
+class KnownDistances:
+    """Lengths measured on the rig: the light's offset from the camera, a scale bar in the
+    scene, distances between camera centres."""
+
+    light_offset_m: float | None = bounded(None, above=0, max=100)
+    scale_bar_m: float | None = bounded(None, above=0, max=100)
+    camera_pairs: tuple[CameraPair, ...] = ()
 
 
 @dataclass(frozen=True)
 class CalibrationChoice:
     """Which calibration store and which of its entries this rig uses."""
 
-    store: str  # a directory, or "default" for the built-in store
     camera: str
-    lights: Mapping[str, str]  # illumination name -> light SPD entry in the store
+    store: str = "default"  # a directory, or "default" for the built-in store
+    lights: Mapping[str, str] = field(default_factory=dict)  # illumination -> light SPD entry
+
+
+@dataclass(frozen=True)
+class Devices:
+    """One section per device kind, each naming its ``driver`` (its other keys are the
+    driver's own, checked when it opens)."""
+
+    light: dict[str, Any] | None = None
+    camera: dict[str, Any] | None = None
+    projector: dict[str, Any] | None = None
+    spectrometer: dict[str, Any] | None = None
+
+
+@dataclass(frozen=True)
+class ProfileFile:
+    """A profile YAML file as written; :func:`parse_profile` checks what spans sections."""
+
+    devices: Devices
+    illuminations: dict[str, dict[str, float]] = bounded(min=0, max=1, min_items=1)
+    plan: Plan = bounded()
+    name: str | None = None
+    description: str | None = None
+    camera_settings: dict[str, Any] = field(default_factory=dict)
+    light_mount: LightMount = field(default_factory=LightMount)
+    calibration: CalibrationChoice | None = None
+    known_distances: KnownDistances = field(default_factory=KnownDistances)
+    poses: Literal["estimate", "known"] = "estimate"
+    sim: dict[str, Any] = field(default_factory=dict)
+    board: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -214,366 +222,151 @@ def load_profile(name_or_path: str | Path) -> Profile:
 
 def parse_profile(data: Any, source: str) -> Profile:
     """Validate a profile mapping; ``source`` names it in every error."""
-    return _Validator(source).profile(data)
+    if data is None:
+        raise RigError(f"{source} is empty", "write a profile; see profiles/sim.yaml")
+    top = from_mapping(ProfileFile, _all_illuminations(data), source)
+    devices = _devices(top.devices, source)
+    _check_illuminations(top.illuminations, source)
+    plan = _plan(top.plan, top.illuminations, devices, source)
+    _check_light_mount(top.light_mount, source)
+    for key in ("exposure_s", "iso"):
+        if key in top.camera_settings:
+            parse_value(top.camera_settings[key], float, source, f"camera_settings.{key}",
+                        {"above": 0})
+    _check_camera_pairs(top.known_distances.camera_pairs, plan.views, source)
+    if top.poses == "known" and not any(
+        d.get("driver") in GROUND_TRUTH_DRIVERS for d in devices.values()
+    ):
+        raise _fail(source, "poses", "is 'known' but no device is simulated",
+                    "'estimate' for a real rig (known poses come only from the sim)")
+    if "trajectory" in top.sim:  # checked now: the sim reads it only when it opens
+        from drivers.sim.trajectory import TrajectoryConfig
+
+        from_mapping(TrajectoryConfig, top.sim["trajectory"], source, "sim.trajectory")
+    calibration = top.calibration
+    if calibration is not None:
+        unnamed = {n: n for n in plan.illuminations if n not in calibration.lights}
+        calibration = replace(calibration, lights={**calibration.lights, **unnamed})
+    name = Path(source).stem if top.name is None else top.name
+    if not name.strip():
+        raise _fail(source, "name", "is empty", "a name for the rig")
+    distances = top.known_distances
+    return Profile(
+        name=name,
+        source=source,
+        data=copy.deepcopy(dict(data)),
+        devices=devices,
+        illuminations=top.illuminations,
+        plan=plan,
+        light_mount=top.light_mount,
+        camera_settings=top.camera_settings,
+        calibration=calibration,
+        known_distances={
+            k: v for k, v in (("light_offset_m", distances.light_offset_m),
+                              ("scale_bar_m", distances.scale_bar_m)) if v is not None
+        },
+        camera_pairs=distances.camera_pairs,
+        poses=top.poses,
+        sim=top.sim,
+        board=None if top.board is None else BoardSpec.from_dict(top.board, source),
+    )
 
 
-class _Validator:
-    """Checks one profile; every error says file, key and what is allowed."""
+def _fail(source: str, key: str, problem: str, allowed: str) -> RigError:
+    return RigError(f"{source}: key '{key}' {problem}", f"allowed: {allowed}")
 
-    def __init__(self, source: str) -> None:
-        self.source = source
 
-    def fail(self, key: str, problem: str, allowed: str) -> RigError:
-        return RigError(f"{self.source}: key '{key}' {problem}", f"allowed: {allowed}")
+def _all_illuminations(data: Any) -> Any:
+    """``data`` with ``plan.illuminations: all`` (or none) spelt out as every defined name."""
+    if not isinstance(data, Mapping) or not isinstance(data.get("plan"), Mapping):
+        return data
+    chosen = data["plan"].get("illuminations", "all")
+    if chosen != "all" or not isinstance(data.get("illuminations"), Mapping):
+        return data
+    return {**data, "plan": {**data["plan"], "illuminations": list(data["illuminations"])}}
 
-    def mapping(self, value: Any, key: str, allowed_keys: tuple[str, ...] | None) -> dict[str, Any]:
-        if not isinstance(value, Mapping):
-            raise self.fail(
-                key,
-                f"must be a mapping, got {_show(value)}",
-                f"a mapping with keys {', '.join(allowed_keys or ('...',))}",
-            )
-        if allowed_keys is not None:
-            for name in value:
-                if name not in allowed_keys:
-                    close = difflib.get_close_matches(str(name), allowed_keys, n=1)
-                    raise self.fail(
-                        f"{key}.{name}" if key else str(name),
-                        "is not known" + (f" (did you mean '{close[0]}'?)" if close else ""),
-                        ", ".join(allowed_keys),
-                    )
-        return dict(value)
 
-    def number(
-        self, value: Any, key: str, *, low: float | None = None, positive: bool = False
-    ) -> float:
+def _devices(section: Devices, source: str) -> dict[str, dict[str, Any]]:
+    devices = {kind: getattr(section, kind) for kind in DEVICE_KINDS}
+    devices = {kind: spec for kind, spec in devices.items() if spec is not None}
+    for kind, spec in devices.items():
+        key = f"devices.{kind}.driver"
+        if "driver" not in spec:
+            raise _fail(source, key, "is missing",
+                        f"a driver name, e.g. {', '.join(known_drivers(kind)[:3])}")
+        driver = parse_value(spec["driver"], str, source, key)
+        known = known_drivers(kind)
+        if (known and driver not in known) or not driver.strip():
+            raise _fail(source, key, f"is '{driver}'", ", ".join(known) or "a driver name")
+        if "transport" in spec:
+            parse_value(spec["transport"], dict[str, Any], source, f"devices.{kind}.transport")
+    if "camera" not in devices:
+        raise _fail(source, "devices.camera", "is missing", "a camera section with a driver")
+    if "light" not in devices and "projector" not in devices:
+        raise _fail(source, "devices.light", "is missing (and there is no projector)",
+                    "a light or a projector section with a driver")
+    return devices
+
+
+def _check_illuminations(illuminations: Mapping[str, Mapping[str, float]], source: str) -> None:
+    for name, levels in illuminations.items():
+        key = f"illuminations.{name}"
         if (
-            isinstance(value, bool)
-            or not isinstance(value, (int, float))
-            or not math.isfinite(value)
+            is_reserved(name)
+            or not name.replace("-", "_").isidentifier()
         ):
-            raise self.fail(key, f"must be a number, got {_show(value)}", "a finite number")
-        if positive and value <= 0:
-            raise self.fail(key, f"must be positive, got {value}", "a number > 0")
-        if low is not None and value < low:
-            raise self.fail(key, f"must be at least {low}, got {value}", f"a number >= {low}")
-        return float(value)
+            raise _fail(source, key, "is not a usable name",
+                        "letters, digits, '_' or '-'; 'ambient', 'white', 'black' and 'gray-...' "
+                        "name the ambient and structured-light frames")
+        if not levels:
+            raise _fail(source, key, "has no channel levels", "channel: level in [0, 1]")
 
-    def boolean(self, value: Any, key: str) -> bool:
-        if not isinstance(value, bool):
-            raise self.fail(key, f"must be true or false, got {_show(value)}", "true, false")
-        return value
 
-    def choice(self, value: Any, key: str, options: tuple[str, ...]) -> str:
-        if value not in options:
-            raise self.fail(key, f"is {_show(value)}", ", ".join(options))
-        return str(value)
-
-    def string(self, value: Any, key: str) -> str:
-        if not isinstance(value, str) or not value.strip():
-            raise self.fail(key, f"must be a non-empty string, got {_show(value)}", "a string")
-        return value
-
-    def profile(self, data: Any) -> Profile:
-        if data is None:
-            raise RigError(f"{self.source} is empty", "write a profile; see profiles/sim.yaml")
-        top = self.mapping(data, "", TOP_KEYS)
-        for key in ("devices", "illuminations", "plan"):
-            if key not in top:
-                raise self.fail(key, "is missing", "see profiles/sim.yaml for a complete profile")
-        devices = self.devices(top["devices"])
-        illuminations = self.illuminations(top["illuminations"], devices)
-        plan = self.plan(top["plan"], illuminations, devices)
-        mount = self.light_mount(top.get("light_mount", {"type": "plate"}))
-        settings = self.mapping(top.get("camera_settings", {}), "camera_settings", None)
-        for key in ("exposure_s", "iso"):
-            if key in settings:
-                self.number(settings[key], f"camera_settings.{key}", positive=True)
-        calibration = self.calibration(top.get("calibration"), plan)
-        distances = self.mapping(top.get("known_distances", {}), "known_distances", DISTANCE_KEYS)
-        pairs = self.camera_pairs(distances.pop("camera_pairs", []), plan.views)
-        known = {
-            k: self.number(v, f"known_distances.{k}", positive=True) for k, v in distances.items()
-        }
-        poses = self.choice(top.get("poses", "estimate"), "poses", POSE_MODES)
-        sim = self.mapping(top.get("sim", {}), "sim", None)
-        self.sim_trajectory(sim.get("trajectory"))
-        if poses == "known" and not any(
-            d.get("driver") in GROUND_TRUTH_DRIVERS for d in devices.values()
-        ):
-            raise self.fail(
-                "poses",
-                "is 'known' but no device knows the true poses",
-                "'estimate' for a real rig (known poses come only from the simulator)",
-            )
-        board = None
-        if top.get("board") is not None:
-            board = BoardSpec.from_dict(self.mapping(top["board"], "board", None), self.source)
-        name = top.get("name", Path(self.source).stem)
-        return Profile(
-            name=self.string(name, "name"),
-            source=self.source,
-            data=copy.deepcopy(top),
-            devices=devices,
-            illuminations=illuminations,
-            plan=plan,
-            light_mount=mount,
-            camera_settings=settings,
-            calibration=calibration,
-            known_distances=known,
-            camera_pairs=pairs,
-            poses=poses,
-            sim=sim,
-            board=board,
+def _plan(
+    plan: Plan, illuminations: Mapping[str, Any], devices: Mapping[str, Any], source: str
+) -> Plan:
+    """``plan`` checked against the rest of the profile, with its projector placements'
+    ``views_per_placement`` filled in."""
+    for name in plan.illuminations:
+        if name not in illuminations:
+            raise _fail(source, "plan.illuminations", f"names '{name}', which is not defined",
+                        ", ".join(illuminations))
+    if len(set(plan.illuminations)) != len(plan.illuminations):
+        raise _fail(source, "plan.illuminations", "repeats a name", "each illumination once")
+    if plan.structured_light is not None and "projector" not in devices:
+        raise _fail(source, "plan.structured_light", "needs a projector",
+                    "a devices.projector section, or remove plan.structured_light")
+    placements = plan.projector
+    if placements is None:
+        return plan
+    if "projector" not in devices:
+        raise _fail(source, "plan.projector", "needs a projector", "a devices.projector section")
+    per = placements.views_per_placement or plan.views // placements.placements
+    if per < 1 or per * placements.placements != plan.views:
+        raise _fail(
+            source,
+            "plan.projector.views_per_placement",
+            f"is {per}: {placements.placements} placements x {per} views is not "
+            f"plan.views = {plan.views}",
+            "a whole number with placements x views_per_placement = plan.views",
         )
+    return replace(plan, projector=replace(placements, views_per_placement=per))
 
-    def devices(self, value: Any) -> dict[str, dict[str, Any]]:
-        section = self.mapping(value, "devices", DEVICE_KINDS)
-        devices: dict[str, dict[str, Any]] = {}
-        for kind, spec in section.items():
-            if spec is None:
-                continue
-            spec = self.mapping(spec, f"devices.{kind}", None)
-            if "driver" not in spec:
-                raise self.fail(
-                    f"devices.{kind}.driver",
-                    "is missing",
-                    f"a driver name, e.g. {', '.join(known_drivers(kind)[:3])}",
-                )
-            driver = self.string(spec["driver"], f"devices.{kind}.driver")
-            known = known_drivers(kind)
-            if known and driver not in known:
-                raise self.fail(f"devices.{kind}.driver", f"is '{driver}'", ", ".join(known))
-            if "transport" in spec:
-                self.mapping(spec["transport"], f"devices.{kind}.transport", None)
-            devices[kind] = spec
-        if "camera" not in devices:
-            raise self.fail("devices.camera", "is missing", "a camera section with a driver")
-        if "light" not in devices and "projector" not in devices:
-            raise self.fail(
-                "devices.light",
-                "is missing (and there is no projector)",
-                "a light or a projector section with a driver",
-            )
-        return devices
 
-    def illuminations(self, value: Any, devices: Mapping[str, Any]) -> dict[str, dict[str, float]]:
-        section = self.mapping(value, "illuminations", None)
-        if not section:
-            raise self.fail("illuminations", "is empty", "at least one named illumination")
-        out: dict[str, dict[str, float]] = {}
-        for name, levels in section.items():
-            key = f"illuminations.{name}"
-            if (
-                not isinstance(name, str)
-                or is_reserved(name)
-                or not name.replace("-", "_").isidentifier()
-            ):
-                raise self.fail(
-                    key,
-                    "is not a usable name",
-                    "letters, digits, '_' or '-'; 'ambient', 'white', 'black' and 'gray-...' "
-                    "name the ambient and structured-light frames",
-                )
-            levels = self.mapping(levels, key, None)
-            if not levels:
-                raise self.fail(key, "has no channel levels", "channel: level in [0, 1]")
-            parsed = {}
-            for channel, level in levels.items():
-                number = self.number(level, f"{key}.{channel}", low=0.0)
-                if number > 1.0:
-                    raise self.fail(f"{key}.{channel}", f"is {number}", "a level in [0, 1]")
-                parsed[str(channel)] = number
-            out[name] = parsed
-        return out
+def _check_light_mount(mount: LightMount, source: str) -> None:
+    if mount.type == "free" and mount.offset_m is not None:
+        raise _fail(source, "light_mount.offset_m", "is set for a free light",
+                    "an offset only with type: plate")
 
-    def plan(
-        self, value: Any, illuminations: Mapping[str, Any], devices: Mapping[str, Any]
-    ) -> Plan:
-        section = self.mapping(value, "plan", PLAN_KEYS)
-        if "views" not in section:
-            raise self.fail("plan.views", "is missing", "a positive whole number of views")
-        views = section["views"]
-        if isinstance(views, bool) or not isinstance(views, int) or views < 1:
-            raise self.fail("plan.views", f"is {_show(views)}", "a positive whole number")
-        chosen = section.get("illuminations", "all")
-        if chosen == "all":
-            chosen = list(illuminations)
-        if not isinstance(chosen, list) or not chosen:
-            raise self.fail(
-                "plan.illuminations",
-                f"is {_show(chosen)}",
-                "'all' or a list of names from 'illuminations'",
-            )
-        for name in chosen:
-            if name not in illuminations:
-                raise self.fail(
-                    "plan.illuminations",
-                    f"names '{name}', which is not defined",
-                    ", ".join(illuminations),
-                )
-        if len(set(chosen)) != len(chosen):
-            raise self.fail("plan.illuminations", "repeats a name", "each illumination once")
-        ambient = self.boolean(section.get("ambient", False), "plan.ambient")
-        settle = self.number(section.get("settle_s", 0.0), "plan.settle_s", low=0.0)
-        structured = None
-        if section.get("structured_light") is not None:
-            if "projector" not in devices:
-                raise self.fail(
-                    "plan.structured_light",
-                    "needs a projector",
-                    "a devices.projector section, or remove plan.structured_light",
-                )
-            sl = self.mapping(section["structured_light"], "plan.structured_light", STRUCTURED_KEYS)
-            structured = StructuredLight(
-                self.boolean(sl.get("gray_code", True), "plan.structured_light.gray_code")
-            )
-        trajectory = Trajectory()
-        if "trajectory" in section:
-            tr = self.mapping(section["trajectory"], "plan.trajectory", TRAJECTORY_KEYS)
-            elevations = tr.get("elevations_deg", list(trajectory.elevations_deg))
-            if not isinstance(elevations, list) or not elevations:
-                raise self.fail(
-                    "plan.trajectory.elevations_deg",
-                    f"is {_show(elevations)}",
-                    "a non-empty list of elevations in degrees",
-                )
-            factors = tr.get("distance_factors", [])
-            key = "plan.trajectory.distance_factors"
-            if not isinstance(factors, list):
-                raise self.fail(
-                    key, f"is {_show(factors)}", "a list of positive factors, e.g. [0.7, 1.0, 1.3]"
-                )
-            trajectory = Trajectory(
-                self.elevations(elevations, "plan.trajectory.elevations_deg"),
-                self.number(tr.get("azimuth_start_deg", 0.0), "plan.trajectory.azimuth_start_deg"),
-                tuple(self.number(f, key, positive=True) for f in factors),
-            )
-        placements = None
-        if section.get("projector") is not None:
-            placements = self.projector_placements(section["projector"], views, devices)
-        return Plan(views, tuple(chosen), ambient, structured, settle, trajectory, placements)
 
-    def elevations(self, values: list[Any], key: str) -> tuple[float, ...]:
-        out = tuple(self.number(e, key) for e in values)
-        if any(abs(e) > 90 for e in out):
-            raise self.fail(key, f"is {_show(values)}", "elevations in degrees within [-90, 90]")
-        return out
-
-    def sim_trajectory(self, value: Any) -> None:
-        """The numbers of ``sim.trajectory`` (the sim checks its keys when it opens; a word
-        where a number belongs would otherwise surface as an internal error)."""
-        if value is None:
-            return
-        key = "sim.trajectory"
-        section = self.mapping(value, key, None)
-        for name in ("radius_m", "free_light_radius_m"):
-            if name in section:
-                self.number(section[name], f"{key}.{name}", positive=True)
-        if "start_azimuth_deg" in section:
-            self.number(section["start_azimuth_deg"], f"{key}.start_azimuth_deg")
-        lists = {"elevations_deg": 0, "distances_m": 0, "target_m": 3, "light_offset_m": 3}
-        for name, length in lists.items():
-            if name not in section:
-                continue
-            items = section[name]
-            if not isinstance(items, list) or (length and len(items) != length):
-                want = f"a list of {length} numbers" if length else "a list of numbers"
-                raise self.fail(f"{key}.{name}", f"is {_show(items)}", want)
-            if name == "elevations_deg":
-                self.elevations(items, f"{key}.{name}")
-            for item in items:
-                self.number(item, f"{key}.{name}", positive=name == "distances_m")
-
-    def projector_placements(
-        self, value: Any, views: int, devices: Mapping[str, Any]
-    ) -> ProjectorPlacements:
-        key = "plan.projector"
-        if "projector" not in devices:
-            raise self.fail(key, "needs a projector", "a devices.projector section")
-        section = self.mapping(value, key, PROJECTOR_PLAN_KEYS)
-        count = section.get("placements")
-        if isinstance(count, bool) or not isinstance(count, int) or count < 1:
-            raise self.fail(f"{key}.placements", f"is {_show(count)}", "a positive whole number")
-        per = section.get("views_per_placement", views // count)
-        if isinstance(per, bool) or not isinstance(per, int) or per < 1 or per * count != views:
-            raise self.fail(
-                f"{key}.views_per_placement",
-                f"is {_show(per)}: {count} placements x {per} views is not plan.views = {views}",
-                "a whole number with placements x views_per_placement = plan.views",
-            )
-        return ProjectorPlacements(count, per)
-
-    def camera_pairs(self, value: Any, n_views: int) -> tuple[CameraPair, ...]:
-        key = "known_distances.camera_pairs"
-        allowed = f"a list of {{views: [a, b], metres: d}} with views in 0..{n_views - 1}"
-        if not isinstance(value, list):
-            raise self.fail(key, f"is {_show(value)}", allowed)
-        pairs = []
-        for i, item in enumerate(value):
-            entry = self.mapping(item, f"{key}[{i}]", ("views", "metres"))
-            views = entry.get("views")
-            if (
-                not isinstance(views, list)
-                or len(views) != 2
-                or not all(isinstance(v, int) and 0 <= v < n_views for v in views)
-                or views[0] == views[1]
-            ):
-                raise self.fail(f"{key}[{i}].views", f"is {_show(views)}", allowed)
-            metres = self.number(entry.get("metres"), f"{key}[{i}].metres", positive=True)
-            pairs.append(CameraPair(views[0], views[1], metres))
-        return tuple(pairs)
-
-    def light_mount(self, value: Any) -> LightMount:
-        section = self.mapping(value, "light_mount", MOUNT_KEYS)
-        kind = self.choice(section.get("type", "plate"), "light_mount.type", MOUNT_TYPES)
-        offset = section.get("offset_m")
-        if offset is None:
-            return LightMount(kind, None)
-        if kind == "free":
-            raise self.fail(
-                "light_mount.offset_m", "is set for a free light", "an offset only with type: plate"
-            )
-        if not isinstance(offset, list) or len(offset) != 3:
-            raise self.fail(
-                "light_mount.offset_m", f"is {_show(offset)}", "[x, y, z] in metres, camera frame"
-            )
-        x, y, z = (self.number(v, "light_mount.offset_m") for v in offset)
-        return LightMount(kind, (x, y, z))
-
-    def calibration(self, value: Any, plan: Plan) -> CalibrationChoice | None:
-        if value is None:
-            return None
-        section = self.mapping(value, "calibration", CALIBRATION_KEYS)
-        store = self.string(section.get("store", "default"), "calibration.store")
-        if "camera" not in section:
-            raise self.fail(
-                "calibration.camera",
-                "is missing",
-                "the name of a camera sensitivity entry in the store",
-            )
-        camera = self.string(section["camera"], "calibration.camera")
-        lights = self.mapping(section.get("lights", {}), "calibration.lights", None)
-        for name, entry in lights.items():
-            self.string(entry, f"calibration.lights.{name}")
-        for name in plan.illuminations:
-            lights.setdefault(name, name)
-        return CalibrationChoice(store, camera, lights)
+def _check_camera_pairs(pairs: tuple[CameraPair, ...], n_views: int, source: str) -> None:
+    for i, pair in enumerate(pairs):
+        if max(pair.views) >= n_views or pair.views[0] == pair.views[1]:
+            raise _fail(source, f"known_distances.camera_pairs[{i}].views",
+                        f"is {list(pair.views)}", f"two different views in 0..{n_views - 1}")
 
 
 def known_drivers(kind: str) -> tuple[str, ...]:
-    """Driver names accepted for ``kind``: the local ones plus the registry's, if it lists
-    them (an empty tuple means "not checkable here; the registry decides at open time")."""
-    try:
-        registry = importlib.import_module("drivers.registry")
-    except ImportError:
-        return ()
-    names = getattr(registry, "DRIVERS", None)
-    if not isinstance(names, Mapping) or kind not in names:
-        return ()
-    return tuple(sorted({*LOCAL_DRIVERS[kind], *names[kind]}))
+    """Driver names accepted for ``kind`` (the registry's)."""
+    return DRIVERS[kind]
 
-
-def _show(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."

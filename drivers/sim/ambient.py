@@ -11,43 +11,32 @@ normal (no ambient occlusion), so the term is ``level``-scaled ``C^T diag(L_room
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
 from calibration.defaults import cie_illuminant, illumination_spd
-from core.errors import RigError
-from drivers.sim.config_keys import reject_unknown_keys
+from core.config import bounded
 from drivers.sim.light import SimLight
 
-KEYS = ("level", "spd", "distance_m")
+
+@dataclass(frozen=True)
+class AmbientConfig:
+    """The ``sim.ambient`` section (see the module docstring)."""
+
+    level: float = bounded(0.0, min=0, max=100)
+    spd: str = "A"
+    distance_m: float | None = bounded(None, above=0, max=100)  # None: the trajectory radius
 
 
-def room_spd(conf: Mapping[str, Any] | None, light: SimLight, radius_m: float) -> np.ndarray | None:
+def room_spd(conf: AmbientConfig | None, light: SimLight, radius_m: float) -> np.ndarray | None:
     """The room light's SPD on the grid, scaled as the module docstring says (None: no room
     light configured or level 0)."""
-    if not conf:
+    if conf is None or conf.level == 0:
         return None
-    if not isinstance(conf, Mapping):
-        raise RigError("sim.ambient is not a mapping", "write e.g. `ambient: {level: 0.1}`")
-    reject_unknown_keys(conf, KEYS, "sim.ambient")
-    try:
-        level = float(conf.get("level", 0.0))
-        distance = float(conf.get("distance_m", radius_m))
-    except (TypeError, ValueError) as error:
-        raise RigError(
-            f"sim.ambient: level/distance_m must be numbers ({error})", "e.g. `level: 0.1`"
-        ) from error
-    if level < 0 or distance <= 0:
-        raise RigError(
-            f"sim.ambient: level {level} must be ≥ 0 and distance_m {distance} > 0",
-            "use e.g. `level: 0.1` (10 % of the bulb)",
-        )
-    if level == 0:
-        return None
+    level, distance = conf.level, conf.distance_m or radius_m
     bulb = np.mean(
         [illumination_spd(v, light.channel_spds).sum() for v in light.illuminations.values()]
     )
-    room = cie_illuminant(str(conf.get("spd", "A")))
+    room = cie_illuminant(conf.spd)
     return np.asarray(room * (level * bulb / distance**2 / room.sum()))

@@ -13,10 +13,9 @@ from __future__ import annotations
 import datetime as dt
 import hashlib
 import zlib
-from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import colour
 import numpy as np
@@ -29,9 +28,9 @@ from calibration.defaults import (
 )
 from calibration.grid import DEFAULT_GRID
 from calibration.spectra import resample
+from core.config import bounded, from_mapping
 from core.errors import RigError
 from drivers.protocols import CapturedFrame
-from drivers.sim.config_keys import reject_unknown_keys
 from drivers.sim.dng import write_dng
 from drivers.sim.light import SimLight
 from drivers.sim.projector import SimProjector
@@ -45,43 +44,34 @@ from reconstruct.model.raycast import RayCaster
 class SensorConfig:
     """The ``camera`` section of a sim profile (defaults: a 640x480 14-bit RGGB camera)."""
 
-    width: int = 640
-    height: int = 480
-    focal_px: float = 800.0
-    black_level: int = 512
-    white_level: int = 16383
-    pattern: str = "RGGB"
-    exposure_s: float = 1.0
-    iso: float = 250.0
-    gain_e_per_dn: float = 1.0  # at ISO 100; halves per ISO doubling
-    read_noise_dn: float = 2.0
-    supersample: int = 2
-    normals: str = "smooth"
+    width: int = bounded(640, min=32, max=16_384)
+    height: int = bounded(480, min=32, max=16_384)
+    focal_px: float = bounded(800.0, above=0, max=1e6)
+    black_level: int = bounded(512, min=0, max=65535)
+    white_level: int = bounded(16383, min=1, max=65535)
+    pattern: Literal["RGGB", "BGGR", "GRBG", "GBRG"] = "RGGB"
+    exposure_s: float = bounded(1.0, above=0, max=3600)
+    iso: float = bounded(250.0, above=0, max=1e6)
+    gain_e_per_dn: float = bounded(1.0, above=0, max=1e6)  # at ISO 100; halves per ISO doubling
+    read_noise_dn: float = bounded(2.0, min=0, max=1e6)
+    supersample: int = bounded(2, min=1, max=8)
+    normals: render.NormalMode = "smooth"
     sensitivity: str = DEFAULT_CAMERA
     make: str = "spectral-rig"
     model: str = "SimCam 14-bit"
     serial: str = "SIM-CAM-0001"
 
-    @classmethod
-    def from_mapping(
-        cls, data: Mapping[str, Any] | None, where: str = "sim.camera"
-    ) -> SensorConfig:
-        data = dict(data or {})
-        reject_unknown_keys(data, (f.name for f in fields(cls)), where)
-        conf = cls(**data)
-        if conf.width % 2 or conf.height % 2 or conf.width < 32 or conf.height < 32:
+    def __post_init__(self) -> None:
+        if self.width % 2 or self.height % 2:
             raise RigError(
-                f"{where}: image size {conf.width}x{conf.height}",
-                "use even width and height of at least 32 pixels (Bayer mosaic, LibRaw minimum)",
+                f"sim.camera: image size {self.width}x{self.height}",
+                "use even width and height (a whole Bayer mosaic)",
             )
-        if not (0 <= conf.black_level < conf.white_level <= 65535):
+        if self.black_level >= self.white_level:
             raise RigError(
-                f"{where}: black {conf.black_level} / white {conf.white_level}",
-                "use 0 <= black_level < white_level <= 65535",
+                f"sim.camera: black {self.black_level} / white {self.white_level}",
+                "use black_level < white_level",
             )
-        if conf.exposure_s <= 0 or conf.iso <= 0:
-            raise RigError(f"{where}: exposure_s and iso must be positive")
-        return conf
 
     @property
     def intrinsics(self) -> Intrinsics:
@@ -166,7 +156,9 @@ class SimCamera:
             changes["exposure_s"] = float(exposure_s)
         if iso is not None:
             changes["iso"] = float(iso)
-        self.sensor = SensorConfig.from_mapping({**_as_dict(self.sensor), **changes})
+        self.sensor = from_mapping(
+            SensorConfig, {**_as_dict(self.sensor), **changes}, "sim config", "sim.camera"
+        )
 
     # --- rendering -------------------------------------------------------------------------
 

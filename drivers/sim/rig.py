@@ -24,21 +24,23 @@ per wavelength); the scene is lifted to stand on it and the cameras aim at its m
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
 
+from core.config import bounded, from_mapping
 from core.errors import RigError
-from drivers.sim.ambient import room_spd
+from drivers.sim.ambient import AmbientConfig, room_spd
 from drivers.sim.camera import SensorConfig
-from drivers.sim.config_keys import reject_unknown_keys
 from drivers.sim.members import RigCamera, RigLight, RigProjector, RigSpectrometer
 from drivers.sim.scene import SCENES, Scene, make_scene
 from drivers.sim.trajectory import (
+    MAX_VIEWS,
     PlacementConfig,
+    ProjectorConfig,
     TrajectoryConfig,
     light_positions,
     placement_poses,
@@ -47,31 +49,36 @@ from drivers.sim.trajectory import (
 from reconstruct.model.camera import Intrinsics, Pose, write_colmap_text
 from reconstruct.model.render import GroundPlane
 
-_KEYS = {
-    "scene",
-    "scene_seed",
-    "subdivisions",
-    "views",
-    "light_offset_m",
-    "trajectory",
-    "camera",
-    "projector",
-    "illuminations",
-    "ground",
-    "ambient",
-}
-_PROJECTOR_DEFAULTS: dict[str, Any] = {
-    "width": 800,
-    "height": 600,
-    "focal_px": 1000.0,
-    "offset_m": [-0.08, 0.0, 0.0],
-    "placements": 0,  # 0: on the camera plate; K: K free placements
-    "views_per_placement": None,  # default: views / placements
-    "placement_radius_m": 0.45,
-    "placement_elevation_deg": 15.0,
-    "view_spread_deg": 35.0,
-}
-_GROUND_KEYS = ("texture", "extent", "paper", "ink")
+
+@dataclass(frozen=True)
+class GroundConfig:
+    """The ``sim.ground`` section: ``texture`` an (H, W) array or ``.npy`` path in [0, 1];
+    ``extent`` [x0, y0, x1, y1] metres; ``paper``, ``ink`` one reflectance or one per
+    wavelength (checked against the scene's grid)."""
+
+    texture: Any
+    extent: tuple[float, float, float, float] = bounded(min=-100, max=100)
+    paper: Any = 0.85
+    ink: Any = 0.04
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """The ``sim`` section of a profile (see the module docstring). ``trajectory`` stays a
+    mapping until the ground's centre and the top-level ``views`` / ``light_offset_m`` are
+    merged in."""
+
+    scene: str = "blob"
+    scene_seed: int | None = None  # None: the rig's seed
+    subdivisions: int = bounded(7, min=0, max=8)  # 8: ~655k vertices on the blob
+    views: int | None = bounded(None, min=1, max=MAX_VIEWS)
+    light_offset_m: tuple[float, float, float] | None = bounded(None, min=-10, max=10)
+    trajectory: dict[str, Any] | None = None
+    camera: SensorConfig = field(default_factory=SensorConfig)
+    projector: ProjectorConfig = field(default_factory=ProjectorConfig)
+    illuminations: dict[str, dict[str, float]] | None = None
+    ground: GroundConfig | None = None
+    ambient: AmbientConfig | None = None
 
 
 def sfm_image_name(view: int) -> str:
@@ -90,27 +97,25 @@ class SimRig:
         seed: int = 0,
         reference_camera: Mapping[str, Any] | None = None,
     ) -> None:
-        conf = dict(config or {})
-        reject_unknown_keys(conf, _KEYS, "sim")
+        conf = from_mapping(SimConfig, config, "sim config", "sim")
         self.seed = int(seed)
         self.reference_camera = dict(
-            reference_camera if reference_camera is not None else conf.get("camera") or {}
+            reference_camera if reference_camera is not None else (config or {}).get("camera") or {}
         )
         self.scene = _load_scene(conf, self.seed)
-        self.ground = _ground(conf.get("ground"), len(self.scene.wavelengths))
-        traj = dict(conf.get("trajectory") or {})
+        self.ground = _ground(conf.ground, len(self.scene.wavelengths))
+        traj = dict(conf.trajectory or {})
         if self.ground is not None:
             self.scene = stand_on_ground(self.scene)
             lo, hi = self.scene.vertices.min(axis=0), self.scene.vertices.max(axis=0)
             traj.setdefault("target_m", [float(x) for x in (lo + hi) / 2])
-        if "views" in conf:
-            traj["views"] = int(conf["views"])
-        if "light_offset_m" in conf:
-            traj["light_offset_m"] = conf["light_offset_m"]
-        self.trajectory = TrajectoryConfig.from_mapping(traj)
-        proj = {**_PROJECTOR_DEFAULTS, **dict(conf.get("projector") or {})}
-        reject_unknown_keys(proj, _PROJECTOR_DEFAULTS, "sim.projector")
-        self.placements = PlacementConfig.from_mapping(proj, self.trajectory.views)
+        if conf.views is not None:
+            traj["views"] = conf.views
+        if conf.light_offset_m is not None:
+            traj["light_offset_m"] = conf.light_offset_m
+        self.trajectory = from_mapping(TrajectoryConfig, traj, "sim config", "sim.trajectory")
+        proj = conf.projector
+        self.placements = PlacementConfig.for_views(proj, self.trajectory.views)
         if self.placements is None:
             self.poses: list[Pose] = ring_poses(self.trajectory)
             self.projector_poses: list[Pose] = []
@@ -122,19 +127,15 @@ class SimRig:
         self.light_offset: np.ndarray | None = (
             np.asarray(self.trajectory.light_offset_m) if self.trajectory.light == "rigid" else None
         )
-        self.sensor = SensorConfig.from_mapping(conf.get("camera"))
+        self.sensor = conf.camera
         self.intrinsics: Intrinsics = self.sensor.intrinsics
-        self.projector_offset = np.asarray(proj["offset_m"], dtype=float)
-        self.light = RigLight(illuminations=conf.get("illuminations"))
-        self.projector = RigProjector(
-            Intrinsics.pinhole(int(proj["width"]), int(proj["height"]), float(proj["focal_px"]))
-        )
+        self.projector_offset = np.asarray(proj.offset_m, dtype=float)
+        self.light = RigLight(illuminations=conf.illuminations)
+        self.projector = RigProjector(Intrinsics.pinhole(proj.width, proj.height, proj.focal_px))
         self.camera = RigCamera(
             self.scene, self.light, self.projector, self.sensor, self.seed, ground=self.ground
         )
-        self.camera.ambient_spd = room_spd(
-            conf.get("ambient"), self.light, self.trajectory.radius_m
-        )
+        self.camera.ambient_spd = room_spd(conf.ambient, self.light, self.trajectory.radius_m)
         self.spectrometer = RigSpectrometer(
             lambda: self.light.spd() + self.projector.spd(), seed=self.seed
         )
@@ -230,10 +231,11 @@ class SimRig:
             device.close()
 
 
-def _load_scene(conf: Mapping[str, Any], seed: int) -> Scene:
-    name = str(conf.get("scene", "blob"))
+def _load_scene(conf: SimConfig, seed: int) -> Scene:
+    name = conf.scene
     if name in SCENES:
-        return make_scene(name, int(conf.get("scene_seed", seed)), int(conf.get("subdivisions", 7)))
+        scene_seed = seed if conf.scene_seed is None else conf.scene_seed
+        return make_scene(name, scene_seed, conf.subdivisions)
     folder = Path(name)
     if folder.is_dir():
         return Scene.load(folder)
@@ -261,27 +263,20 @@ def _spectrum(value: Any, n: int, key: str) -> np.ndarray:
     return arr
 
 
-def _ground(value: Any, n_wavelengths: int) -> GroundPlane | None:
+def _ground(conf: GroundConfig | None, n_wavelengths: int) -> GroundPlane | None:
     """``sim.ground`` -> a :class:`GroundPlane` (None when absent)."""
-    if value is None:
+    if conf is None:
         return None
-    if not isinstance(value, Mapping) or set(value) - set(_GROUND_KEYS) or "texture" not in value:
-        raise RigError(
-            f"sim.ground must be a mapping with keys {', '.join(_GROUND_KEYS)}",
-            "give texture (array or .npy file), extent [x0, y0, x1, y1] (m), paper, ink",
-        )
-    texture = value["texture"]
+    texture = conf.texture
     if isinstance(texture, (str, Path)):
         path = Path(texture)
         if not path.is_file():
             raise RigError(f"sim.ground.texture file {path} does not exist", "give a .npy file")
         texture = np.load(path, allow_pickle=False)
-    extent = value.get("extent")
-    if extent is None or len(extent) != 4:
-        raise RigError("sim.ground.extent is missing or not 4 numbers", "give [x0, y0, x1, y1]")
+    extent = conf.extent
     return GroundPlane(
         np.clip(np.asarray(texture, dtype=np.float32), 0.0, 1.0),
         (float(extent[0]), float(extent[1]), float(extent[2]), float(extent[3])),
-        _spectrum(value.get("paper", 0.85), n_wavelengths, "paper"),
-        _spectrum(value.get("ink", 0.04), n_wavelengths, "ink"),
+        _spectrum(conf.paper, n_wavelengths, "paper"),
+        _spectrum(conf.ink, n_wavelengths, "ink"),
     )

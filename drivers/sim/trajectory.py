@@ -12,58 +12,50 @@ sphere around the object on the camera's side.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, fields
-from typing import Any
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
+from core.config import bounded
 from core.errors import RigError
-from drivers.sim.config_keys import reject_unknown_keys
 from reconstruct.model.camera import Pose
+
+MAX_VIEWS = 1000  # more than any capture takes; the sim renders every one
+
+
+@dataclass(frozen=True)
+class ProjectorConfig:
+    """The ``sim.projector`` section: the projector's optics, its offset on the camera plate,
+    and (``placements`` > 0) free placements instead, ``views_per_placement`` camera views each
+    (default: views / placements)."""
+
+    width: int = bounded(800, min=16, max=16_384)
+    height: int = bounded(600, min=16, max=16_384)
+    focal_px: float = bounded(1000.0, above=0, max=1e6)
+    offset_m: tuple[float, float, float] = bounded((-0.08, 0.0, 0.0), min=-10, max=10)
+    placements: int = bounded(0, min=0, max=MAX_VIEWS)
+    views_per_placement: int | None = bounded(None, min=1, max=MAX_VIEWS)
+    placement_radius_m: float = bounded(0.45, above=0, max=100)
+    placement_elevation_deg: float = bounded(15.0, min=-90, max=90)
+    view_spread_deg: float = bounded(35.0, min=0, max=180)
 
 
 @dataclass(frozen=True)
 class TrajectoryConfig:
     """Ring trajectory settings (the ``trajectory`` section of a sim profile)."""
 
-    views: int = 40
-    elevations_deg: tuple[float, ...] = (20.0, 45.0)
-    radius_m: float = 0.5
-    distances_m: tuple[float, ...] = ()  # cycled over the views; empty: radius_m for all
-    target_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    start_azimuth_deg: float = 0.0
-    light: str = "rigid"  # "rigid" or "free"
-    light_offset_m: tuple[float, float, float] = (0.06, -0.03, 0.0)
-    free_light_radius_m: float = 0.45
-
-    @classmethod
-    def from_mapping(
-        cls, data: Mapping[str, Any] | None, where: str = "sim.trajectory"
-    ) -> TrajectoryConfig:
-        """Build from a profile section; unknown keys and bad values raise :class:`RigError`."""
-        data = dict(data or {})
-        reject_unknown_keys(data, (f.name for f in fields(cls)), where)
-        for key in ("elevations_deg", "distances_m", "target_m", "light_offset_m"):
-            if key in data:
-                data[key] = tuple(float(x) for x in data[key])
-        conf = cls(**data)
-        if conf.views < 1 or conf.radius_m <= 0 or not conf.elevations_deg:
-            raise RigError(
-                f"{where}: views={conf.views}, radius_m={conf.radius_m}, "
-                f"elevations_deg={list(conf.elevations_deg)}",
-                "use views >= 1, a positive radius and at least one elevation",
-            )
-        if any(d <= 0 for d in conf.distances_m):
-            raise RigError(
-                f"{where}.distances_m = {list(conf.distances_m)}",
-                "give positive camera distances in metres, e.g. [0.35, 0.5, 0.65]",
-            )
-        if conf.light not in ("rigid", "free"):
-            raise RigError(f"{where}.light = {conf.light!r}", "use 'rigid' or 'free'")
-        if len(conf.target_m) != 3 or len(conf.light_offset_m) != 3:
-            raise RigError(f"{where}: target_m and light_offset_m need 3 numbers (metres)")
-        return conf
+    views: int = bounded(40, min=1, max=MAX_VIEWS)
+    elevations_deg: tuple[float, ...] = bounded((20.0, 45.0), min=-90, max=90, min_items=1)
+    radius_m: float = bounded(0.5, above=0, max=100)
+    # cycled over the views; empty: radius_m for all
+    distances_m: tuple[float, ...] = bounded((), above=0, max=100)
+    target_m: tuple[float, float, float] = bounded((0.0, 0.0, 0.0), min=-100, max=100)
+    start_azimuth_deg: float = bounded(0.0, min=-360, max=360)
+    light: Literal["rigid", "free"] = "rigid"
+    light_offset_m: tuple[float, float, float] = bounded((0.06, -0.03, 0.0), min=-10, max=10)
+    free_light_radius_m: float = bounded(0.45, above=0, max=100)
 
 
 def view_distances(conf: TrajectoryConfig) -> np.ndarray:
@@ -101,29 +93,25 @@ class PlacementConfig:
     view_spread_deg: float
 
     @classmethod
-    def from_mapping(cls, data: Mapping[str, Any], views: int) -> PlacementConfig | None:
+    def for_views(cls, projector: ProjectorConfig, views: int) -> PlacementConfig | None:
         """None when ``placements`` is 0 (the projector rides on the camera plate)."""
-        count = int(data.get("placements") or 0)
+        count = projector.placements
         if count == 0:
             return None
-        per = data.get("views_per_placement")
-        per = views // count if per is None else int(per)
-        if count < 0 or per < 1 or count * per != views:
+        per = projector.views_per_placement or views // count
+        if per < 1 or count * per != views:
             raise RigError(
                 f"sim.projector: {count} placements x {per} views per placement does not "
                 f"give the {views} views of the trajectory",
                 "make views = placements x views_per_placement",
             )
-        conf = cls(
+        return cls(
             count,
             per,
-            float(data.get("placement_radius_m", 0.45)),
-            float(data.get("placement_elevation_deg", 15.0)),
-            float(data.get("view_spread_deg", 35.0)),
+            projector.placement_radius_m,
+            projector.placement_elevation_deg,
+            projector.view_spread_deg,
         )
-        if conf.radius_m <= 0:
-            raise RigError("sim.projector.placement_radius_m must be positive")
-        return conf
 
 
 def _eye(target: np.ndarray, radius: float, azimuth_deg: float, elevation_deg: float) -> np.ndarray:

@@ -19,7 +19,7 @@ import logging
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import cv2
 import numpy as np
@@ -28,9 +28,10 @@ import tifffile
 from rich.progress import track
 from scipy.ndimage import maximum_filter
 
+from core.config import bounded, from_mapping
 from core.errors import RigError
 from core.session import FrameRecord, Session, verify_frames, write_bytes_atomically
-from reconstruct.frames.raw import DEMOSAIC, read_linear_rgb
+from reconstruct.frames.raw import read_linear_rgb
 from reconstruct.run.stages import run_stage
 
 log = logging.getLogger("reconstruct.frames.decode")
@@ -48,21 +49,11 @@ class DecodeConfig:
     ``sfm_illumination``: which illumination's frame of each view goes to SfM (None: the
     brightest)."""
 
-    demosaic: str = "ahd"
-    saturation: float = 0.98
-    on_bad_frame: str = "skip"
+    demosaic: Literal["linear", "vng", "ppg", "ahd", "dcb", "dht", "aahd"] = "ahd"  # DEMOSAIC
+    saturation: float = bounded(0.98, above=0.0, max=1.0)
+    on_bad_frame: Literal["skip", "stop"] = "skip"
     sfm_illumination: str | None = None
-    sfm_max_side: int = 0  # 0: keep the full size
-
-    def __post_init__(self) -> None:
-        if self.demosaic not in DEMOSAIC:
-            raise RigError(
-                f"decode.demosaic {self.demosaic!r} is unknown", f"use one of {', '.join(DEMOSAIC)}"
-            )
-        if self.on_bad_frame not in ("skip", "stop"):
-            raise RigError(
-                f"decode.on_bad_frame {self.on_bad_frame!r} is unknown", "use skip or stop"
-            )
+    sfm_max_side: int = bounded(0, min=0, max=100_000)  # 0: keep the full size
 
 
 @dataclass
@@ -264,7 +255,7 @@ def _sfm_score(illumination: str, rgb: np.ndarray, conf: DecodeConfig) -> float:
 
 def run(conf: DecodeConfig | Mapping[str, Any], session_dir: Path, out_dir: Path) -> Path:
     """Decode every frame of the session into ``out_dir`` (resumable)."""
-    conf = conf if isinstance(conf, DecodeConfig) else DecodeConfig(**conf)
+    conf = from_mapping(DecodeConfig, conf, "config", "decode")
     session = Session.open(session_dir)
     inputs = [session_dir / "manifest.jsonl"] + [session_dir / r.path for r in session.frames]
     run_stage("decode", asdict(conf), inputs, out_dir, lambda: _decode(session, conf, out_dir))

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import trimesh
 
+from core.config import bounded, from_mapping
 from core.errors import RigError
 from core.session import write_bytes_atomically
 from reconstruct.geometry.visibility import FILE as VIS_FILE
@@ -48,11 +49,11 @@ class SubdivideConfig:
     result; ``decimate``: coarsen a mesh whose mean edge is below ``decimate_below`` × the
     target to the target first."""
 
-    target_px: float = 2.0
-    max_steps: int = 6
-    max_faces: int = 2_000_000
+    target_px: float = bounded(2.0, above=0.0, max=10_000.0)
+    max_steps: int = bounded(6, min=0, max=20)
+    max_faces: int = bounded(2_000_000, min=1, max=100_000_000)
     decimate: bool = True
-    decimate_below: float = 0.8
+    decimate_below: float = bounded(0.8, min=0.0, max=1.0)
 
 
 def beta(valence: np.ndarray) -> np.ndarray:
@@ -217,10 +218,8 @@ def run(
     vis_conf: VisibilityConfig | Mapping[str, Any] | None = None,
 ) -> Path:
     """Subdivided mesh and its visibility into ``out_dir`` (resumable); returns the mesh."""
-    conf = conf if isinstance(conf, SubdivideConfig) else SubdivideConfig(**conf)
-    vconf = (
-        vis_conf if isinstance(vis_conf, VisibilityConfig) else VisibilityConfig(**(vis_conf or {}))
-    )
+    conf = from_mapping(SubdivideConfig, conf, "config", "subdivide")
+    vconf = from_mapping(VisibilityConfig, vis_conf, "config", "visibility")
     inputs = [mesh_path, vis_path, poses_dir / "images.txt", poses_dir / "cameras.txt"]
     run_stage(
         "subdivide", asdict(conf) | {"visibility": asdict(vconf)}, inputs, out_dir,

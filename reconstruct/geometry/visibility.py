@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import trimesh
 
+from core.config import bounded, from_mapping
 from core.session import write_bytes_atomically
 from reconstruct.initial_mesh.dense.poisson import read_mesh
 from reconstruct.model.camera import Intrinsics, Pose, project
@@ -37,9 +38,9 @@ class VisibilityConfig:
     """``eps``: self-hit tolerance relative to the scene size; ``margin_px``: border of the
     image treated as outside; ``min_cos``: least cosine between normal and view direction."""
 
-    eps: float = 1e-4
-    margin_px: float = 1.0
-    min_cos: float = 0.0
+    eps: float = bounded(1e-4, above=0.0, max=1.0)
+    margin_px: float = bounded(1.0, min=0.0, max=10_000.0)
+    min_cos: float = bounded(0.0, min=-1.0, max=1.0)
 
 
 @dataclass
@@ -122,7 +123,7 @@ def run(
     conf: VisibilityConfig | Mapping[str, Any], mesh_path: Path, poses_dir: Path, out_dir: Path
 ) -> Path:
     """V(i) of ``mesh_path``'s vertices into ``out_dir/visibility.npz`` (resumable)."""
-    conf = conf if isinstance(conf, VisibilityConfig) else VisibilityConfig(**conf)
+    conf = from_mapping(VisibilityConfig, conf, "config", "visibility")
     inputs = [mesh_path, poses_dir / "images.txt", poses_dir / "cameras.txt"]
     run_stage("visibility", asdict(conf), inputs, out_dir,
               lambda: _visibility(mesh_path, poses_dir, conf, out_dir))

@@ -34,11 +34,12 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from rich.progress import track
 
+from core.config import bounded, from_mapping
 from core.errors import RigError
 from core.labels import REFERENCES, is_structured
 from core.session import FrameRecord, Session, write_bytes_atomically
@@ -71,9 +72,6 @@ POINTS = "points.ply"
 LIGHTS = "lights.json"
 SUMMARY = "procam.json"
 PLACEMENT_KEY = "projector_placement"
-MODES = ("auto", "placements", "plate")
-
-
 @dataclass(frozen=True)
 class ProcamConfig:
     """``mode``: auto | placements | plate; ``projector_focal_px``: the projector's focal length
@@ -83,24 +81,20 @@ class ProcamConfig:
     ``poisson_trim``: Poisson octree depth and density trim; ``trim_distance``: mesh faces
     farther than this many point spacings from the cloud are cut."""
 
-    mode: str = "auto"
-    projector_focal_px: float | None = None
-    projector_size: tuple[int, int] | None = None
-    min_contrast: float = 0.05
-    min_bit_contrast: float = 0.25
+    mode: Literal["auto", "placements", "plate"] = "auto"
+    projector_focal_px: float | None = bounded(None, above=0.0, max=1e6)
+    projector_size: tuple[int, int] | None = bounded(None, min=1, max=32_768)
+    min_contrast: float = bounded(0.05, min=0.0, max=1.0)
+    min_bit_contrast: float = bounded(0.25, min=0.0, max=1.0)
     auto_bits: bool = True
-    min_views: int = 2
-    max_reproj_px: float = 2.0
-    min_angle_deg: float = 2.0
-    normal_neighbours: int = 12
-    poisson_depth: int = 8
-    poisson_trim: float = 5.0
-    trim_distance: float = 4.0
-    num_threads: int = 1
-
-    def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise RigError(f"procam.mode {self.mode!r} is unknown", f"use one of {MODES}")
+    min_views: int = bounded(2, min=2, max=1000)
+    max_reproj_px: float = bounded(2.0, above=0.0, max=1000.0)
+    min_angle_deg: float = bounded(2.0, min=0.0, max=90.0)
+    normal_neighbours: int = bounded(12, min=3, max=1000)
+    poisson_depth: int = bounded(8, min=1, max=14)
+    poisson_trim: float = bounded(5.0, min=0.0, max=1000.0)
+    trim_distance: float = bounded(4.0, above=0.0, max=1e6)
+    num_threads: int = bounded(1, min=1, max=1024)
 
     @property
     def decode_options(self) -> DecodeOptions:
@@ -394,7 +388,7 @@ def procam_initial_mesh(
     stage's output). Returns ``out_dir/initial.ply``; ``lights.json`` beside it holds the
     projector light position of every view.
     """
-    conf = conf if isinstance(conf, ProcamConfig) else ProcamConfig(**conf)
+    conf = from_mapping(ProcamConfig, conf, "config", "procam")
     out_dir = Path(out_dir)
     inputs = [session.root / "manifest.jsonl", session.root / "session.yaml"]
     if decoded_dir is not None:

@@ -18,15 +18,16 @@ import logging
 import shutil
 from collections import defaultdict
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import cv2
 import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
+from core.config import bounded, from_mapping
 from core.errors import RigError
 from core.session import write_bytes_atomically
 from reconstruct.frames.decode import INDEX, DecodeIndex, load_frame
@@ -49,7 +50,6 @@ from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.model.raycast import RayCaster
 from reconstruct.poses import stage as poses_stage
 from reconstruct.poses.board import BoardSpec
-from reconstruct.run.config_check import check_types
 from reconstruct.run.stages import run_stage
 
 log = logging.getLogger("reconstruct.initial_mesh.stage")
@@ -58,7 +58,6 @@ log = logging.getLogger("reconstruct.initial_mesh.stage")
 MIN_STEREO_POINTS = 500
 
 MESH = "initial.ply"
-METHODS = ("hull_stereo", "patchmatch", "visual_hull")
 SUMMARY = "initial.json"
 
 
@@ -83,17 +82,6 @@ class MeshConfig:
     is carved above this height over the board."""
 
     def __post_init__(self) -> None:
-        if self.method not in METHODS:
-            raise RigError(
-                f"mesh.method {self.method!r} is unknown", f"use one of {', '.join(METHODS)}"
-            )
-        dilate = self.mask_dilate_px
-        if dilate is not None and (isinstance(dilate, bool) or not isinstance(dilate, int)
-                                   or dilate < 0):
-            raise RigError(
-                f"mesh.mask_dilate_px is {dilate!r}",
-                "give a whole number of pixels >= 0, or null for the method's default",
-            )
         self.board_spec()  # a malformed board fails here, naming the key
 
     def board_spec(self) -> BoardSpec | None:
@@ -101,42 +89,28 @@ class MeshConfig:
             return self.board
         return BoardSpec.from_dict(dict(self.board), source="mesh.board")
 
-    method: str = "patchmatch"  # one of METHODS
-    voxels: int = 96
-    poisson_trim: float = 5.0
-    mask_dilate_px: int | None = None
-    carve_votes: int = 2
-    min_views: int = 3
+    method: Literal["hull_stereo", "patchmatch", "visual_hull"] = "patchmatch"
+    voxels: int = bounded(96, min=4, max=2048)
+    poisson_trim: float = bounded(5.0, min=0.0, max=1000.0)
+    mask_dilate_px: int | None = bounded(None, min=0, max=1000)
+    carve_votes: int = bounded(2, min=1, max=1000)
+    min_views: int = bounded(3, min=1, max=1000)
     fill_unseen_from_hull: bool = False
-    num_threads: int = 1  # Poisson's OpenMP threads; more only pay on an idle many-core host
+    # Poisson's OpenMP threads; more only pay on an idle many-core host
+    num_threads: int = bounded(1, min=1, max=1024)
     stereo: StereoConfig = field(default_factory=StereoConfig)
     patchmatch: PatchMatchConfig = field(default_factory=PatchMatchConfig)
-    board: BoardSpec | Mapping[str, Any] | None = None
-    floor_margin_m: float = 0.001
+    board: Mapping[str, Any] | BoardSpec | None = None
+    floor_margin_m: float = bounded(0.001, min=0.0, max=10.0)
 
 
-def mesh_config(data: Mapping[str, Any]) -> MeshConfig:
-    """MeshConfig from a mapping whose ``stereo`` and ``patchmatch`` sections may themselves be
-    mappings (checked key by key like the top-level sections)."""
+def mesh_config(data: Mapping[str, Any], where: str = "config") -> MeshConfig:
+    """MeshConfig from the ``mesh`` section; a ``BoardSpec`` under ``board`` is kept as its
+    mapping, so the stage's stamp is the same however the board was given."""
     values = dict(data)
-    for key, kind in (("stereo", StereoConfig), ("patchmatch", PatchMatchConfig)):
-        if isinstance(values.get(key), Mapping):
-            values[key] = _nested_section(values[key], kind, f"config mesh.{key}")
     if isinstance(values.get("board"), BoardSpec):
         values["board"] = values["board"].to_dict()
-    return MeshConfig(**values)
-
-
-def _nested_section(value: Mapping[str, Any], kind: type[Any], where: str) -> Any:
-    known = {f.name for f in fields(kind)}
-    bad = set(value) - known
-    if bad:
-        raise RigError(
-            f"unknown key(s) in {where}: {', '.join(sorted(bad))}",
-            f"use {', '.join(sorted(known))}",
-        )
-    check_types(value, kind(), where)
-    return kind(**value)
+    return from_mapping(MeshConfig, values, where, "mesh")
 
 
 def load_user_mesh(path: Path) -> trimesh.Trimesh:

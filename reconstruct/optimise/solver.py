@@ -20,6 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
+from core.config import bounded
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.kernels.cg import cg_direction, cg_step, project_to_stage
 from reconstruct.optimise.kernels.preconditioner import (
@@ -38,16 +39,19 @@ _NO_DAMPING = np.empty(0)
 
 @dataclass
 class SolverSettings:
-    max_iterations: int = 30
-    function_tolerance: float = 1e-4  # stop when a step lowers the cost by less than this share
+    max_iterations: int = bounded(30, min=0, max=10_000)
+    # stop when a step lowers the cost by less than this share
+    function_tolerance: float = bounded(1e-4, min=0.0, max=1.0)
     # Stop when a step is rejected right after one that lowered the cost by less than this
     # share: the model no longer predicts the cost, and a retry costs a CG solve for less.
-    stall_tolerance: float = 2e-3
-    step_tolerance: float = 1e-9  # stop when |δ| <= tol · (|θ| + tol)
-    initial_lambda: float = 1e-3
-    cg_tolerance: float = 1e-2  # inner solve relative residual (CG is cheap next to linearising)
-    cg_max_iterations: int = 50
-    backtracking_steps: int = 2  # halvings of a rejected step tried before λ grows
+    stall_tolerance: float = bounded(2e-3, min=0.0, max=1.0)
+    step_tolerance: float = bounded(1e-9, min=0.0, max=1.0)  # stop when |δ| <= tol · (|θ| + tol)
+    initial_lambda: float = bounded(1e-3, min=0.0, max=1e12)
+    # inner solve relative residual (CG is cheap next to linearising)
+    cg_tolerance: float = bounded(1e-2, min=0.0, max=1.0)
+    cg_max_iterations: int = bounded(50, min=1, max=100_000)
+    # halvings of a rejected step tried before λ grows
+    backtracking_steps: int = bounded(2, min=0, max=100)
 
 
 @dataclass

@@ -9,13 +9,14 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
 
 from calibration.basis import SpectralBasis
 from calibration.estimation import DEFAULT_SMOOTHNESS
+from core.config import bounded, from_mapping
 from core.errors import RigError
 from reconstruct.optimise.checkpoint import Checkpoint, OptimiseState
 from reconstruct.optimise.cost import JointCost, Robust
@@ -34,7 +35,6 @@ from reconstruct.optimise.uncertainty import (
     vertex_uncertainty,
 )
 from reconstruct.optimise.weights import edge_scale
-from reconstruct.run.config_check import check_types, is_number
 
 log = logging.getLogger(__name__)
 # "offset": one shared camera-plate offset (bulb); "free": one position per view (projector);
@@ -51,19 +51,20 @@ class OptimiseSettings:
     # weights the spectral term must carry the null space (the far red under white LEDs).
     # γ2 (photometric) is 4, not 2: where a thin part's normals end off, only the vertex's
     # neighbours can correct its mis-scaled reflectance (docs/architecture.md, Cost).
-    gamma: tuple[float, float, float] = (3.0, 4.0, 0.01)
+    gamma: tuple[float, float, float] = bounded((3.0, 4.0, 0.01), min=0.0, max=1e9)
     # The rendering term is evaluated in 8-bit units (image value × 255), as in the paper's
     # implementation: in 0..1 linear units the paper's γ over-regularise by 255² (the light
     # distance then trades against the reflectance scale; light z off by centimetres).
-    rendering_scale: float = 255.0
+    rendering_scale: float = bounded(255.0, above=0.0, max=1e9)
     light_mode: SettingsLightMode = "offset"
     robust: Robust = "none"
-    robust_scale: float = 0.02  # linear image units: RGB error where the robust loss bends
-    outer_iterations: int = 3
-    light_iterations: int = 15
+    # linear image units: RGB error where the robust loss bends
+    robust_scale: float = bounded(0.02, above=0.0, max=1e3)
+    outer_iterations: int = bounded(3, min=0, max=1000)
+    light_iterations: int = bounded(15, min=0, max=10_000)
     # Each joint stage does most of its work in its first few steps; the shadow and
     # observation rebuild between stages moves the problem more than later steps would.
-    joint_iterations: int = 8
+    joint_iterations: int = bounded(8, min=0, max=10_000)
     # Vertices move along their normals (fixed per joint stage), not in 3-D as in the paper:
     # shading and the geometric term are blind to tangential motion, along which they drift.
     optimise_positions: bool = True
@@ -73,9 +74,9 @@ class OptimiseSettings:
     # positions. One or two corrupted views otherwise pull silhouette vertices into spikes.
     # The stage cap is as wide as the total one: a tighter cap clamps many vertices of a
     # dense start from the first step, and LM's steps then no longer fit the clamped problem.
-    max_step_edges: float = 2.0
-    max_total_edges: float = 2.0
-    min_views: int = 2
+    max_step_edges: float = bounded(2.0, min=0.0, max=1e6)
+    max_total_edges: float = bounded(2.0, min=0.0, max=1e6)
+    min_views: int = bounded(2, min=0, max=10_000)
     # Coarse to fine: the rendering term's disparity cue reaches about as far as the blur of
     # the images it samples, so a start a few pixels off is out of reach at full resolution.
     # With ``coarse_blur_px`` > 0 the light stage and then ``coarse_levels`` joint stages sample
@@ -83,67 +84,28 @@ class OptimiseSettings:
     # scale; nearer views are blurred more, so every view blurs the same patch of surface),
     # and a vertex may move up to σ per coarse stage (the total limit grows by the same);
     # the ``outer_iterations`` full-resolution stages follow.
-    coarse_blur_px: float = 0.0
-    coarse_levels: int = 2
-    settle_position: float = 0.02  # stop when no vertex moved more than this × mean edge length
-    settle_light_m: float = 1e-4
-    sigma_chroma: float = 0.03
-    sigma_intensity: float = 0.25
-    init_smoothness: float = DEFAULT_SMOOTHNESS  # the 2-D estimate the solve starts from
-    margin_px: float = 1.0
+    coarse_blur_px: float = bounded(0.0, min=0.0, max=1000.0)
+    coarse_levels: int = bounded(2, min=0, max=20)
+    # stop when no vertex moved more than this × mean edge length
+    settle_position: float = bounded(0.02, min=0.0, max=1e6)
+    settle_light_m: float = bounded(1e-4, min=0.0, max=1e6)
+    sigma_chroma: float = bounded(0.03, min=0.0, max=1e6)
+    sigma_intensity: float = bounded(0.25, min=0.0, max=1e6)
+    # the 2-D estimate the solve starts from
+    init_smoothness: float = bounded(DEFAULT_SMOOTHNESS, min=0.0, max=1e9)
+    margin_px: float = bounded(1.0, min=0.0, max=10_000.0)
     # Observations seen at grazing angles (cos(normal, view) below this) are dropped: their
     # bilinear taps straddle the silhouette and mix in the background.
-    min_view_cos: float = 0.3
-    shadow_eps: float = 1e-4
+    min_view_cos: float = bounded(0.3, min=-1.0, max=1.0)
+    shadow_eps: float = bounded(1e-4, min=0.0, max=1.0)
     solver: SolverSettings = field(default_factory=SolverSettings)
 
     @classmethod
     def from_mapping(
         cls, conf: Mapping[str, Any] | None, where: str = "config"
     ) -> OptimiseSettings:
-        """Settings from a mapping (YAML); unknown keys are an error naming the key."""
-        if not isinstance(conf or {}, Mapping):
-            raise RigError(f"{where}: the section is {conf!r}", "write it as key: value lines")
-        conf = dict(conf or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(conf) - known)
-        if unknown:
-            raise RigError(
-                f"{where}: unknown optimise setting(s) {', '.join(unknown)}",
-                f"use only {', '.join(sorted(known))}",
-            )
-        solver = conf.pop("solver", {}) or {}
-        if not isinstance(solver, Mapping):
-            raise RigError(f"{where}: solver is {solver!r}", "write it as key: value lines")
-        solver = dict(solver)
-        sknown = {f.name for f in fields(SolverSettings)}
-        if set(solver) - sknown:
-            raise RigError(
-                f"{where}: unknown solver setting(s) {', '.join(sorted(set(solver) - sknown))}",
-                f"use only {', '.join(sorted(sknown))}",
-            )
-        gamma = conf.pop("gamma", cls.gamma)
-        if (
-            not isinstance(gamma, (list, tuple))
-            or len(gamma) != 3
-            or not all(is_number(g) and g >= 0 for g in gamma)
-        ):
-            raise RigError(
-                f"{where}: gamma is {gamma!r}, not three non-negative numbers", "e.g. [3, 4, 0.01]"
-            )
-        check_types(conf, cls(), where, low=0.0, lows={"min_view_cos": -1.0})
-        check_types(solver, SolverSettings(), f"{where} solver", low=0.0)
-        out = cls(**conf, solver=SolverSettings(**solver))
-        out.gamma = tuple(float(g) for g in gamma)  # type: ignore[assignment]
-        if out.light_mode not in ("offset", "free", "fixed"):
-            raise RigError(
-                f"{where}: light_mode {out.light_mode!r} is unknown", "use offset, free or fixed"
-            )
-        if out.robust not in ("none", "huber", "cauchy"):
-            raise RigError(
-                f"{where}: robust loss {out.robust!r} is unknown", "use none, huber or cauchy"
-            )
-        return out
+        """Settings from the config's ``optimise`` section; errors name ``where`` and the key."""
+        return from_mapping(cls, conf, where, "optimise")
 
 
 @dataclass

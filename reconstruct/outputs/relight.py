@@ -16,12 +16,12 @@ from pathlib import Path
 import colour
 import cv2
 import numpy as np
-import yaml
 
 from calibration.colorimetry import xyz_weights
 from calibration.grid import SpectralGrid
 from calibration.importers import read_spectrum
 from calibration.spectra import resample
+from core.config import bounded, from_mapping
 from core.errors import RigError
 from core.yamlio import read_yaml
 from reconstruct.model.camera import Intrinsics, Pose, read_colmap_text
@@ -71,6 +71,19 @@ def write_png(path: Path, rgb8: np.ndarray) -> Path:
     return path
 
 
+@dataclass(frozen=True)
+class CameraFile:
+    """A virtual camera in YAML: image size, focal length, and where it stands and looks
+    (metres, world frame)."""
+
+    width: int = bounded(min=1, max=32_768)
+    height: int = bounded(min=1, max=32_768)
+    focal_px: float = bounded(above=0, max=1e6)
+    eye: tuple[float, float, float] = bounded()
+    target: tuple[float, float, float] = bounded()
+    up: tuple[float, float, float] = (0.0, 0.0, 1.0)
+
+
 def load_camera_file(path: Path) -> Camera:
     """A camera from a COLMAP text model folder (its first image) or a YAML file with
     ``width, height, focal_px, eye, target`` [``up``] (metres, world frame)."""
@@ -80,17 +93,13 @@ def load_camera_file(path: Path) -> Camera:
             raise RigError(f"{path}/images.txt lists no image", "add the camera's pose")
         cid, _, pose = images[min(images)]
         return Camera(cams[cid], pose)
-    try:
-        data = read_yaml(path, "camera file", "fix the YAML syntax")
-        intr = Intrinsics.pinhole(int(data["width"]), int(data["height"]), float(data["focal_px"]))
-        up = tuple(data.get("up", (0.0, 0.0, 1.0)))
-        pose = Pose.look_at(np.asarray(data["eye"], float), np.asarray(data["target"], float), up)
-    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as error:
-        raise RigError(
-            f"cannot read camera file {path}: {error}",
-            "give a COLMAP text model folder or YAML with width, height, focal_px, eye, target",
-        ) from error
-    return Camera(intr, pose)
+    data = read_yaml(path, "camera file", "fix the YAML syntax")
+    conf = from_mapping(CameraFile, data, f"camera file {path}")
+    if conf.eye == conf.target:
+        raise RigError(f"camera file {path}: eye and target are the same point",
+                       "give a target the camera looks at from its eye")
+    pose = Pose.look_at(np.asarray(conf.eye), np.asarray(conf.target), conf.up)
+    return Camera(Intrinsics.pinhole(conf.width, conf.height, conf.focal_px), pose)
 
 
 def relight(

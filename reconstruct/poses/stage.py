@@ -35,12 +35,13 @@ import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import cv2
 import numpy as np
 import pycolmap
 
+from core.config import bounded, from_mapping
 from core.errors import RigError
 from core.session import Session, write_bytes_atomically
 from reconstruct.frames.decode import INDEX, SFM_DIR, DecodeIndex, load_frame
@@ -70,7 +71,6 @@ log = logging.getLogger("reconstruct.poses.stage")
 SUMMARY = "poses.json"
 POINTS = "points3D.npy"
 MIN_VIEWS = 3
-SOURCES = ("auto", "known", "board", "sfm")
 
 
 @dataclass(frozen=True)
@@ -93,35 +93,20 @@ class PosesConfig:
     COLMAP's photo defaults (upright DoG, 100 inliers) split them into fragments.
     """
 
-    source: str = "auto"
+    source: Literal["auto", "known", "board", "sfm"] = "auto"
     use_known: bool = True
-    matcher: str = "auto"
-    max_features: int = 8192
+    matcher: Literal["auto", "exhaustive", "sequential"] = "auto"
+    max_features: int = bounded(8192, min=1, max=1_000_000)
     affine_sift: bool = True
     guided_matching: bool = True
-    init_min_inliers: int = 30
+    init_min_inliers: int = bounded(30, min=1, max=100_000)
     refine_intrinsics: bool = False
-    num_threads: int = -1
-    board_with_sfm: bool | str = "auto"
-    board_min_corners: int = 6
-    board_max_rms_px: float = 3.0
+    num_threads: int = bounded(-1, min=-1, max=1024)  # -1: all cores
+    board_with_sfm: bool | Literal["auto"] = "auto"
+    board_min_corners: int = bounded(6, min=1, max=100_000)
+    board_max_rms_px: float = bounded(3.0, above=0.0, max=1000.0)
     board_model: str = "RADIAL"
     board_refine_intrinsics: bool | None = None
-
-    def __post_init__(self) -> None:
-        if self.source not in SOURCES:
-            raise RigError(
-                f"poses.source {self.source!r} is unknown", f"use one of {', '.join(SOURCES)}"
-            )
-        if self.board_with_sfm not in (True, False, "auto"):
-            raise RigError(
-                f"poses.board_with_sfm {self.board_with_sfm!r} is unknown",
-                "use auto, true or false",
-            )
-        if self.matcher not in ("auto", "exhaustive", "sequential"):
-            raise RigError(
-                f"poses.matcher {self.matcher!r} is unknown", "use auto, exhaustive or sequential"
-            )
 
 
 @dataclass
@@ -684,7 +669,7 @@ def run(
     conf: PosesConfig | Mapping[str, Any], session_dir: Path, decoded_dir: Path, out_dir: Path
 ) -> Path:
     """Poses of every view (known, board, SfM or board + SfM) into ``out_dir`` (resumable)."""
-    conf = conf if isinstance(conf, PosesConfig) else PosesConfig(**conf)
+    conf = from_mapping(PosesConfig, conf, "config", "poses")
     session = Session.open(session_dir)
     inputs = [session_dir / "session.yaml", decoded_dir / INDEX, session.poses_dir]
     if out_dir.exists() and not (out_dir / ".stamp.json").exists():

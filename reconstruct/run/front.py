@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +20,7 @@ import trimesh
 from rich import get_console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+from core.config import from_mapping
 from core.errors import RigError
 from core.labels import is_structured
 from core.session import RECON_DIR, Session
@@ -37,11 +38,10 @@ from reconstruct.initial_mesh.procam import (
     procam_initial_mesh,
     read_light_positions,
 )
-from reconstruct.initial_mesh.stage import MeshConfig, mesh_config
+from reconstruct.initial_mesh.stage import MeshConfig
 from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.poses import stage as poses
 from reconstruct.poses.stage import PosesConfig, PoseSummary
-from reconstruct.run.config_check import check_types
 from reconstruct.run.stages import attach_log_file
 
 log = logging.getLogger("reconstruct")
@@ -60,32 +60,9 @@ class FrontConfig:
     procam: ProcamConfig = field(default_factory=ProcamConfig)
 
     @classmethod
-    def from_mapping(cls, data: Mapping[str, Any]) -> FrontConfig:
-        sections = {f.name: f for f in fields(cls)}
-        unknown = set(data) - set(sections)
-        if unknown:
-            raise RigError(
-                f"unknown reconstruction config section(s): {', '.join(sorted(unknown))}",
-                f"use {', '.join(sections)}",
-            )
-        built: dict[str, Any] = {}
-        for name, value in data.items():
-            kind = type(getattr(cls(), name))
-            if isinstance(value, kind):
-                built[name] = value
-                continue
-            if not isinstance(value or {}, Mapping):
-                raise RigError(f"config section {name} is {value!r}", "write key: value lines")
-            known = {f.name for f in fields(kind)}
-            bad = set(value or {}) - known
-            if bad:
-                raise RigError(
-                    f"unknown key(s) in config section {name}: {', '.join(sorted(bad))}",
-                    f"use {', '.join(sorted(known))}",
-                )
-            check_types(value or {}, getattr(cls(), name), f"config {name}")
-            built[name] = mesh_config(value or {}) if kind is MeshConfig else kind(**(value or {}))
-        return cls(**built)
+    def from_mapping(cls, data: Mapping[str, Any] | None, where: str = "config") -> FrontConfig:
+        """From the config's front sections; every error names ``where`` and the key."""
+        return from_mapping(cls, data, where)
 
 
 @dataclass

@@ -82,13 +82,9 @@ def load_config(path: Path | None) -> dict[str, Any]:
             f"use {', '.join((*FRONT_SECTIONS, 'optimise'))}",
         )
     # Checked now, not when the stage is reached minutes later.
-    try:
-        FrontConfig.from_mapping({k: v for k, v in data.items() if k in FRONT_SECTIONS})
-    except RigError as error:
-        raise RigError(f"config {path}: {error.problem}", error.fix) from error
-    except TypeError as error:  # a nested section's dataclass rejected a key
-        raise RigError(f"config {path}: {error}", "check the section's keys") from error
-    OptimiseSettings.from_mapping(data.get("optimise"), f"config {path} optimise")
+    front = {k: v for k, v in data.items() if k in FRONT_SECTIONS}
+    FrontConfig.from_mapping(front, f"config {path}")
+    OptimiseSettings.from_mapping(data.get("optimise"), f"config {path}")
     return data
 
 
@@ -397,7 +393,7 @@ def run_reconstruction(
     session_dir = Path(session_dir)
     conf = dict(config or {})
     opt_conf = conf.pop("optimise", None)
-    settings = OptimiseSettings.from_mapping(opt_conf, "config optimise")
+    settings = OptimiseSettings.from_mapping(opt_conf)
     session = Session.open(session_dir)
     recon = session_dir / RECON_DIR
     with tracked(recon) as status:

@@ -92,7 +92,7 @@ class IterationProgress:
         cls, config: Mapping[str, Any] | None, console: Console | None = None, show: bool = True
     ) -> IterationProgress:
         """Caps from the reconstruct config's ``optimise`` section."""
-        settings = OptimiseSettings.from_mapping((config or {}).get("optimise"), "config optimise")
+        settings = OptimiseSettings.from_mapping((config or {}).get("optimise"))
         caps = {
             "light": settings.light_iterations,
             "coarse": settings.joint_iterations,

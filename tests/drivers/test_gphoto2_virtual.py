@@ -141,7 +141,7 @@ def test_missing_exposure_falls_back_to_the_camera_then_fails_clearly(tmp_path: 
         ({"settings": {"exposure_s": 7.0}}, "offers no shutterspeed matching"),
         ({"config": {"capturetarget": "Floppy"}}, "the camera refuses capturetarget = 'Floppy'"),
         ({"config": {"nosuchwidget": "1"}}, "the camera has no setting 'nosuchwidget'"),
-        ({"unknown_key": 1}, "unexpected or missing setting"),
+        ({"unknown_key": 1}, "key 'unknown_key' is not known"),
     ],
 )
 def test_bad_settings_are_named(tmp_path: Path, spec: dict, message: str) -> None:

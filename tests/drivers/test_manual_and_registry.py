@@ -151,7 +151,7 @@ def test_registry_opens_the_serial_text_light_on_a_pty() -> None:
 
 
 def test_bad_driver_settings_are_a_rig_error() -> None:
-    with pytest.raises(RigError, match="unexpected or missing setting"):
+    with pytest.raises(RigError, match="light driver 'manual': key 'colour' is not known"):
         open_light({"driver": "manual", "colour": "blue"})
     with pytest.raises(RigError, match="tuya light needs device_id"):
         open_light({"driver": "tuya"})

@@ -81,7 +81,7 @@ PROFILES = [
     Case("profile-duplicate-inline-key",
          profile(SIM.replace("{views: 4,", "{views: 4, views: 6,")), r"duplicate key 'views'"),
     Case("profile-empty", profile(""), r"p\.yaml is empty"),
-    Case("profile-a-list", profile("- a\n- b\n"), r"p\.yaml.*must be a mapping"),
+    Case("profile-a-list", profile("- a\n- b\n"), r"p\.yaml is \['a', 'b'\] .* a mapping"),
     Case("profile-bad-syntax", profile(SIM + "plan: {views: [\n"), r"p\.yaml is not valid YAML"),
     Case("profile-unknown-key", profile(SIM + "plna: 1\n"), r"p\.yaml.*'plna'"),
     Case("profile-views-zero", profile(SIM.replace("views: 4", "views: 0")), r"plan\.views"),
@@ -158,7 +158,8 @@ CONFIGS = [
     Case("config-robust-scale-nan", config("optimise: {robust_scale: .nan}\n"), r"robust_scale"),
     Case("config-bool-word", config("optimise: {optimise_positions: maybe}\n"),
          r"optimise_positions"),
-    Case("config-optimise-list", config("optimise: [1, 2]\n"), r"c\.yaml optimise"),
+    Case("config-optimise-list", config("optimise: [1, 2]\n"),
+         r"c\.yaml: key 'optimise' is \[1, 2\] .* a mapping"),
     Case("config-duplicate-section", config("optimise: {}\noptimise: {gamma: [1, 1, 1]}\n"),
          r"c\.yaml.*duplicate key 'optimise'"),
     Case("config-duplicate-key", config("optimise:\n  gamma: [1, 1, 1]\n  gamma: [2, 2, 2]\n"),
@@ -254,6 +255,8 @@ def relight(*args: str) -> Callable[[Path], list[str]]:
         (tmp / "adir").mkdir(exist_ok=True)
         write(tmp / "cam.yaml", "width: 64\nheight: 48\nwidth: 32\n")
         write(tmp / "bin.yaml", BINARY)
+        write(tmp / "far.yaml", "width: 64\nheight: 48\nfocal_px: long\neye: [1, 0, 0]\n"
+              "target: [0, 0, 0]\n")
         return ["relight", str(tmp / "s"), *(a.replace("TMP", str(tmp)) for a in args)]
 
     return make
@@ -273,6 +276,8 @@ RELIGHT = [
     Case("relight-camera-duplicate", relight("--camera", "TMP/cam.yaml"),
          r"cam\.yaml.*duplicate key 'width'"),
     Case("relight-camera-binary", relight("--camera", "TMP/bin.yaml"), r"bin\.yaml"),
+    Case("relight-camera-focal-word", relight("--camera", "TMP/far.yaml"),
+         r"far\.yaml: key 'focal_px' is 'long'"),
     Case("relight-no-recon", relight("--view", "0"), r"reflectance\.npz"),
     Case("relight-no-view-or-camera", relight(), r"--view"),
 ]

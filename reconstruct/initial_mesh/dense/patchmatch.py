@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from core.config import bounded
 from reconstruct.initial_mesh.dense.plane_cost import (
     INVALID_COST,
     evaluate,
@@ -52,23 +53,25 @@ class PatchMatchConfig:
     many pixels and relative depth; ``min_consistent``: views that must confirm a point;
     ``seed``: random hypotheses."""
 
-    scale: float = 0.5
-    window: int = 5
-    window_step: int = 1
-    sources: int = 4
-    top_k: int = 2
-    iterations: int = 6
-    depth_range: float = 0.15
-    hull_margin: float = 0.5  # search in front of the hull too, as a fraction of depth_range
-    cost_max: float = 0.5
-    min_texture: float = 0.02
-    consistency_px: float = 1.0
-    consistency_depth: float = 0.005
-    min_consistent: int = 2
-    max_normal_deg: float = 80.0  # planes seen more obliquely than this are not proposed
-    poisson_depth: int = 9
-    poisson_trim: float = 2.0
-    seed: int = 0
+    scale: float = bounded(0.5, above=0.0, max=1.0)
+    window: int = bounded(5, min=1, max=63)
+    window_step: int = bounded(1, min=1, max=16)
+    sources: int = bounded(4, min=1, max=64)
+    top_k: int = bounded(2, min=1, max=64)
+    iterations: int = bounded(6, min=0, max=100)
+    depth_range: float = bounded(0.15, above=0.0, max=10.0)
+    # search in front of the hull too, as a fraction of depth_range
+    hull_margin: float = bounded(0.5, min=0.0, max=10.0)
+    cost_max: float = bounded(0.5, min=0.0, max=2.0)
+    min_texture: float = bounded(0.02, min=0.0, max=10.0)
+    consistency_px: float = bounded(1.0, min=0.0, max=1000.0)
+    consistency_depth: float = bounded(0.005, min=0.0, max=1.0)
+    min_consistent: int = bounded(2, min=1, max=64)
+    # planes seen more obliquely than this are not proposed
+    max_normal_deg: float = bounded(80.0, above=0.0, max=90.0)
+    poisson_depth: int = bounded(9, min=1, max=14)
+    poisson_trim: float = bounded(2.0, min=0.0, max=1000.0)
+    seed: int = bounded(0, min=0)
 
 
 @dataclass

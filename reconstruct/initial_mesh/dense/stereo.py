@@ -18,6 +18,7 @@ import numpy as np
 import trimesh
 from scipy.ndimage import map_coordinates
 
+from core.config import bounded
 from reconstruct.model.camera import Intrinsics, Pose, project
 from reconstruct.model.raycast import RayCaster
 from reconstruct.run.progress import track
@@ -27,15 +28,17 @@ log = logging.getLogger("reconstruct.initial_mesh.dense")
 
 @dataclass(frozen=True)
 class StereoConfig:
-    neighbours: int = 4
-    window: int = 7
-    ncc_min: float = 0.6
-    uniqueness: float = 0.05  # best NCC must beat any other peak (beyond ±3 steps) by this
-    depth_range: float = 0.15  # of the hull's largest extent, swept inwards from the hull
-    max_steps: int = 48
-    min_angle_deg: float = 4.0
-    consistency: float = 0.01  # relative depth agreement between views
-    min_consistent: int = 2  # views whose depth maps must confirm a point
+    neighbours: int = bounded(4, min=1, max=64)
+    window: int = bounded(7, min=1, max=63)
+    ncc_min: float = bounded(0.6, min=-1.0, max=1.0)
+    # best NCC must beat any other peak (beyond ±3 steps) by this
+    uniqueness: float = bounded(0.05, min=0.0, max=2.0)
+    # of the hull's largest extent, swept inwards from the hull
+    depth_range: float = bounded(0.15, above=0.0, max=10.0)
+    max_steps: int = bounded(48, min=1, max=10_000)
+    min_angle_deg: float = bounded(4.0, min=0.0, max=90.0)
+    consistency: float = bounded(0.01, min=0.0, max=1.0)  # relative depth agreement between views
+    min_consistent: int = bounded(2, min=1, max=64)  # views whose depth maps must confirm a point
 
 
 @dataclass

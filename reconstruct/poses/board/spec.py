@@ -9,14 +9,16 @@ paper) is converted once here, so every other module sees world coordinates only
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import cv2
 import numpy as np
 import yaml
 
+from core.config import bounded, from_mapping
 from core.errors import RigError
 from core.yamlio import read_yaml
 
@@ -31,6 +33,21 @@ DEFAULT_DICTIONARY = "DICT_5X5_100"
 DEFAULT_SQUARES = (10, 7)  # small squares: more corners survive around the object
 DEFAULT_MARKER_RATIO = 0.75
 PRINT_MARGIN_M = 0.012  # keeps the board clear of printers' unprintable rim and of the caption
+
+
+@dataclass(frozen=True)
+class BoardEntry:
+    """A ``board:`` mapping as ``rig board`` prints it (squares and lengths required);
+    :meth:`BoardSpec.from_dict` checks what spans keys."""
+
+    squares: tuple[int, int] = bounded(min=1, max=1000)  # columns, rows
+    square_length_m: float = bounded(above=0, max=10)
+    marker_length_m: float = bounded(above=0, max=10)
+    type: Literal["charuco"] = "charuco"
+    dictionary: str = DEFAULT_DICTIONARY
+    legacy_pattern: bool = False
+    paper: str | None = None
+    measured_square_length_m: float | None = bounded(None, above=0, max=10)
 
 
 @dataclass(frozen=True)
@@ -228,43 +245,23 @@ class BoardSpec:
         return header + yaml.safe_dump({"board": self.to_dict()}, sort_keys=False)
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any], source: str = "profile") -> BoardSpec:
+    def from_dict(cls, data: Mapping[str, Any], source: str = "profile") -> BoardSpec:
         """From a profile's ``board:`` mapping (or a dict holding one)."""
-        if isinstance(data, dict) and "board" in data and isinstance(data["board"], dict):
+        if isinstance(data, Mapping) and isinstance(data.get("board"), Mapping):
             data = data["board"]
-        if not isinstance(data, dict):
-            raise RigError(
-                f"{source}: board must be a mapping", "write it as printed by `rig board`"
-            )
-        kind = data.get("type", "charuco")
-        if kind != "charuco":
-            raise RigError(f"{source}: board.type {kind!r} is not supported", "use charuco")
-        for key in ("squares", "square_length_m", "marker_length_m"):
-            if key not in data:
-                raise RigError(
-                    f"{source}: board.{key} is missing",
-                    "regenerate the snippet with `rig board` or copy the key from its output",
-                )
+        entry = from_mapping(BoardEntry, data, source, "board")
         try:
-            sx, sy = (int(v) for v in data["squares"])
-            measured = data.get("measured_square_length_m")
-            spec = cls(
-                squares=(sx, sy),
-                square_length_m=float(data["square_length_m"]),
-                marker_length_m=float(data["marker_length_m"]),
-                dictionary=str(data.get("dictionary", DEFAULT_DICTIONARY)),
-                legacy_pattern=bool(data.get("legacy_pattern", False)),
-                paper=data.get("paper"),
-                measured_square_length_m=None if measured is None else float(measured),
+            return cls(
+                entry.squares,
+                entry.square_length_m,
+                entry.marker_length_m,
+                entry.dictionary,
+                entry.legacy_pattern,
+                entry.paper,
+                entry.measured_square_length_m,
             )
         except RigError as exc:
             raise RigError(f"{source}: {exc.problem}", exc.fix) from exc
-        except (TypeError, ValueError) as exc:
-            raise RigError(
-                f"{source}: board entry is malformed ({exc})",
-                "squares is [columns, rows]; lengths are numbers in metres",
-            ) from exc
-        return spec
 
     @classmethod
     def from_yaml(cls, path: Path) -> BoardSpec:

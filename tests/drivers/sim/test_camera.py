@@ -101,7 +101,7 @@ def test_saturation_clips_at_white_level(chart: Scene, tmp_path: Path) -> None:
     with rawpy.imread(str(frame.paths[0])) as raw:
         assert raw.raw_image.max() == 16383
     assert frame.extra["saturated_fraction"] > 0.1
-    with pytest.raises(RigError, match="positive"):
+    with pytest.raises(RigError, match=r"sim\.camera\.exposure_s' is 0\.0 .* > 0"):
         cam.set_exposure(exposure_s=0.0)
 
 

@@ -129,7 +129,7 @@ def test_scenes_are_seeded_and_distinct(tmp_path: Path) -> None:
 
 
 def test_bad_config_is_refused() -> None:
-    with pytest.raises(RigError, match="unknown key"):
+    with pytest.raises(RigError, match="'sim.colour' is not known"):
         SimRig({"scene": "blob", "colour": 1})
     with pytest.raises(RigError, match="sim.camera"):
         SimRig({"subdivisions": 3, "camera": {"width": 33}})

@@ -116,9 +116,10 @@ def test_sim_room_light_is_in_the_bulb_off_frame():
 
 
 def test_sim_room_light_config_errors_name_the_key():
-    with pytest.raises(RigError, match=r"sim.ambient: unknown key\(s\) levle"):
+    unknown = r"'sim\.ambient\.levle' is not known \(did you mean 'level'\?\)"
+    with pytest.raises(RigError, match=unknown):
         SimRig({"scene": "blob", "subdivisions": 2, "ambient": {"levle": 0.1}})
-    with pytest.raises(RigError, match="level -1"):
+    with pytest.raises(RigError, match=r"'sim\.ambient\.level' is -1"):
         SimRig({"scene": "blob", "subdivisions": 2, "ambient": {"level": -1}})
 
 

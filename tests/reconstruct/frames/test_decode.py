@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import rawpy
 
+from core.config import from_mapping
 from core.errors import RigError
 from core.session import FrameRecord, append_manifest, sha256_file
 from reconstruct.frames import decode
@@ -141,6 +142,6 @@ def test_corrupt_raw_with_matching_hash_is_reported(
 
 def test_config_is_checked() -> None:
     with pytest.raises(RigError, match="demosaic"):
-        DecodeConfig(demosaic="magic")
+        from_mapping(DecodeConfig, {"demosaic": "magic"}, "config", "decode")
     with pytest.raises(RigError, match="on_bad_frame"):
-        DecodeConfig(on_bad_frame="ignore")
+        from_mapping(DecodeConfig, {"on_bad_frame": "ignore"}, "config", "decode")

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from core.config import from_mapping
 from core.errors import RigError
 from core.session import FrameRecord, Session, append_manifest
 from reconstruct.frames import decode
@@ -111,7 +112,7 @@ def test_session_without_gray_code_is_refused(tmp_path: Path) -> None:
 
 def test_unknown_mode_is_refused() -> None:
     with pytest.raises(RigError, match="procam.mode"):
-        ProcamConfig(mode="stereo")
+        from_mapping(ProcamConfig, {"mode": "stereo"}, "config", "procam")
 
 
 PROFILE = """\

@@ -48,7 +48,7 @@ def test_snippet_round_trip_and_measured_scale(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("entry", "message"),
     [
-        ({"squares": [7, 5], "square_length_m": 0.03}, "board.marker_length_m is missing"),
+        ({"squares": [7, 5], "square_length_m": 0.03}, "'board.marker_length_m' is missing"),
         ({"squares": [7, 5], "square_length_m": 0.03, "marker_length_m": 0.04}, "smaller"),
         (
             {
@@ -68,7 +68,8 @@ def test_snippet_round_trip_and_measured_scale(tmp_path: Path) -> None:
             },
             "needs 200 markers",
         ),
-        ({"squares": "7x5", "square_length_m": 0.03, "marker_length_m": 0.02}, "malformed"),
+        ({"squares": "7x5", "square_length_m": 0.03, "marker_length_m": 0.02},
+         "'board.squares' is '7x5'"),
     ],
 )
 def test_bad_snippets_name_the_key(entry: dict, message: str) -> None:

@@ -20,6 +20,7 @@ from board_synthetic import (
     true_poses,
 )
 
+from core.config import from_mapping
 from core.errors import RigError
 from reconstruct.frames import decode
 from reconstruct.model.camera import Pose, write_colmap_text
@@ -120,7 +121,7 @@ def test_sfm_runs_beside_the_board_only_where_it_can_add_a_view(
     _, summary = _poses(root, {"board_with_sfm": True})  # the cross-check, asked for
     assert calls == [1] and summary.source == "board+sfm"
     with pytest.raises(RigError, match="board_with_sfm"):
-        poses.PosesConfig(board_with_sfm="sometimes")
+        from_mapping(poses.PosesConfig, {"board_with_sfm": "sometimes"}, "config", "poses")
 
 
 def test_sfm_neighbourhood_of_the_unposed_views_in_capture_order() -> None:
@@ -190,7 +191,7 @@ def test_source_choice_and_errors(
     session_copy: Path, make_session: Callable[..., Path], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     with pytest.raises(RigError, match="poses.source"):
-        poses.PosesConfig(source="lidar")
+        from_mapping(poses.PosesConfig, {"source": "lidar"}, "config", "poses")
     with pytest.raises(RigError, match="poses.source is known"):
         _poses(session_copy, {"source": "known"})
     plain = make_session(views=4, illuminations=("white",), known_poses=False)

@@ -65,7 +65,7 @@ def test_given_initial_mesh_is_subdivided(
 
 
 def test_config_errors(tmp_path: Path) -> None:
-    with pytest.raises(RigError, match="section"):
+    with pytest.raises(RigError, match="'optimise' is not known"):
         FrontConfig.from_mapping({"optimise": {}})
     with pytest.raises(RigError, match="voxel"):
         FrontConfig.from_mapping({"mesh": {"voxel": 3}})
