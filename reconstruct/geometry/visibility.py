@@ -19,11 +19,12 @@ from typing import Any
 import numpy as np
 import trimesh
 
-from core.session import write_bytes_atomically
+from core.files import write_bytes_atomically
 from reconstruct.initial_mesh.dense.poisson import read_mesh
 from reconstruct.model.camera import Intrinsics, Pose, project
 from reconstruct.model.raycast import RayCaster
-from reconstruct.poses import stage as poses_stage
+from reconstruct.poses.output import PoseSet
+from reconstruct.poses.output import load as load_poses
 from reconstruct.run.progress import track
 from reconstruct.run.stages import run_stage
 
@@ -134,9 +135,9 @@ def pair_shadow_mask(
     return ~caster.occluded(points[rows], targets, eps, normals[rows])
 
 
-def _visibility(mesh_path: Path, poses_dir: Path, conf: VisibilityConfig, out_dir: Path) -> None:
+def _visibility(mesh_path: Path, posed: PoseSet, conf: VisibilityConfig, out_dir: Path) -> None:
     mesh = read_mesh(mesh_path)
-    intrinsics, poses, _ = poses_stage.load(poses_dir)
+    intrinsics, poses, _ = posed
     vis = compute_visibility(mesh, intrinsics, poses, conf)
     vis.save(out_dir / FILE)
     counts = vis.counts()
@@ -149,11 +150,16 @@ def _visibility(mesh_path: Path, poses_dir: Path, conf: VisibilityConfig, out_di
 
 
 def run(
-    conf: VisibilityConfig | Mapping[str, Any], mesh_path: Path, poses_dir: Path, out_dir: Path
+    conf: VisibilityConfig | Mapping[str, Any],
+    mesh_path: Path,
+    poses_dir: Path,
+    out_dir: Path,
+    posed: PoseSet | None = None,
 ) -> Path:
-    """V(i) of ``mesh_path``'s vertices into ``out_dir/visibility.npz`` (resumable)."""
+    """V(i) of ``mesh_path``'s vertices into ``out_dir/visibility.npz`` (resumable);
+    ``posed``: the poses stage's output when the caller has loaded it."""
     conf = conf if isinstance(conf, VisibilityConfig) else VisibilityConfig(**conf)
     inputs = [mesh_path, poses_dir / "images.txt", poses_dir / "cameras.txt"]
     run_stage("visibility", asdict(conf), inputs, out_dir,
-              lambda: _visibility(mesh_path, poses_dir, conf, out_dir))
+              lambda: _visibility(mesh_path, posed or load_poses(poses_dir), conf, out_dir))
     return out_dir / FILE

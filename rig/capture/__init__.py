@@ -11,7 +11,8 @@ from rich.console import Console
 from rich.markup import escape
 
 from core.errors import RigError
-from core.session import POSES_DIR, SESSION_FILE, FrameRecord
+from core.manifest import FrameRecord
+from core.session import POSES_DIR, SESSION_FILE
 from rig.capture.devices import Ask, RigDevices, open_devices
 from rig.capture.engine import CaptureStopped, RunEngine, RunState
 from rig.capture.resume import prepare_resume
@@ -225,7 +226,7 @@ def _new_info(
             if profile.light_mount.offset_m
             else None,
         },
-        # reconstruct.poses.stage reads the camera-centre distances as this list (metric scale)
+        # reconstruct.poses.sfm reads the camera-centre distances as this list (metric scale)
         "known_distances": [pair.as_dict() for pair in profile.camera_pairs],
         "known_lengths": dict(profile.known_distances),
         "calibration": calibration,

@@ -12,7 +12,8 @@ import pytest
 import rawpy
 
 from core.errors import RigError
-from core.session import FrameRecord, append_manifest, sha256_file
+from core.files import sha256_file
+from core.manifest import FrameRecord, append_manifest
 from reconstruct.frames import decode
 from reconstruct.frames.decode import DecodeConfig, DecodeIndex, decode_raw, load_frame
 

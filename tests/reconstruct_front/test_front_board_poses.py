@@ -23,8 +23,13 @@ from board_synthetic import (
 from core.errors import RigError
 from reconstruct.frames import decode
 from reconstruct.model.camera import Pose, write_colmap_text
+from reconstruct.poses import sfm as poses_sfm
 from reconstruct.poses import stage as poses
-from reconstruct.poses.stage import SfmResult
+from reconstruct.poses.board_sfm import sfm_neighbourhood
+from reconstruct.poses.config import PosesConfig
+from reconstruct.poses.output import PoseSummary
+from reconstruct.poses.output import load as load_poses
+from reconstruct.poses.sfm import SfmResult
 
 TRUTH = true_poses()
 
@@ -46,9 +51,9 @@ def rotation_deg(a: Pose, b: Pose) -> float:
     return float(np.degrees(np.arccos(np.clip((np.trace(a.R @ b.R.T) - 1) / 2, -1.0, 1.0))))
 
 
-def _poses(root: Path, conf: dict[str, Any] | None = None) -> tuple[dict, poses.PoseSummary]:
+def _poses(root: Path, conf: dict[str, Any] | None = None) -> tuple[dict, PoseSummary]:
     out = poses.run(conf or {}, root, root / "recon" / "decoded", root / "recon" / "poses")
-    intr, pose_map, summary = poses.load(out)
+    intr, pose_map, summary = load_poses(out)
     return {v: (intr[v], pose_map[v]) for v in pose_map}, summary
 
 
@@ -87,7 +92,7 @@ def test_sfm_adds_the_view_the_board_misses(
         seen.append(args[-1])  # the board's intrinsics are passed on, fixed
         return fake_sfm(TRUTH, points)
 
-    monkeypatch.setattr(poses, "run_sfm", sfm)
+    monkeypatch.setattr(poses_sfm, "run_sfm", sfm)
     cameras, summary = _poses(session_copy)
     assert summary.source == "board+sfm" and summary.registered == len(TRUTH)
     assert seen == [INTRINSICS]
@@ -113,20 +118,20 @@ def test_sfm_runs_beside_the_board_only_where_it_can_add_a_view(
         calls.append(1)
         return fake_sfm(TRUTH[:HIDDEN], np.zeros((5, 3)))
 
-    monkeypatch.setattr(poses, "run_sfm", sfm)
+    monkeypatch.setattr(poses_sfm, "run_sfm", sfm)
     cameras, summary = _poses(root)  # auto
     assert calls == [] and summary.source == "board" and summary.registered == HIDDEN
     shutil.rmtree(root / "recon" / "poses")
     _, summary = _poses(root, {"board_with_sfm": True})  # the cross-check, asked for
     assert calls == [1] and summary.source == "board+sfm"
     with pytest.raises(RigError, match="board_with_sfm"):
-        poses.PosesConfig(board_with_sfm="sometimes")
+        PosesConfig(board_with_sfm="sometimes")
 
 
 def test_sfm_neighbourhood_of_the_unposed_views_in_capture_order() -> None:
     views = list(range(40))
-    assert poses.sfm_neighbourhood(views, [0, 39], 4) == [*range(5), *range(35, 40)]
-    assert poses.sfm_neighbourhood(views, [20], 2) == [18, 19, 20, 21, 22]
+    assert sfm_neighbourhood(views, [0, 39], 4) == [*range(5), *range(35, 40)]
+    assert sfm_neighbourhood(views, [20], 2) == [18, 19, 20, 21, 22]
 
 
 def test_sfm_beside_the_board_runs_on_the_hidden_views_neighbours(
@@ -146,7 +151,7 @@ def test_sfm_beside_the_board_runs_on_the_hidden_views_neighbours(
             cameras.pop("view_0014.png")
         return SfmResult(cameras, full.points, full.mean_reprojection_error_px)
 
-    monkeypatch.setattr(poses, "run_sfm", sfm)
+    monkeypatch.setattr(poses_sfm, "run_sfm", sfm)
     # the neighbourhood's model misses the hidden view: SfM of every view follows
     cameras, summary = _poses(root)
     assert [len(a) for a in asked] == [9, 15] and summary.views["14"]["source"] == "sfm"
@@ -167,7 +172,7 @@ def test_failing_sfm_is_tolerated(session_copy: Path, monkeypatch: pytest.Monkey
     def sfm(*_: Any) -> SfmResult:
         raise RigError("structure from motion registered no views", "texture")
 
-    monkeypatch.setattr(poses, "run_sfm", sfm)
+    monkeypatch.setattr(poses_sfm, "run_sfm", sfm)
     cameras, summary = _poses(session_copy)
     assert summary.source == "board" and summary.registered == len(TRUTH) - 1
     assert "registered no views" in summary.extra["sfm_error"]
@@ -190,7 +195,7 @@ def test_source_choice_and_errors(
     session_copy: Path, make_session: Callable[..., Path], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     with pytest.raises(RigError, match="poses.source"):
-        poses.PosesConfig(source="lidar")
+        PosesConfig(source="lidar")
     with pytest.raises(RigError, match="poses.source is known"):
         _poses(session_copy, {"source": "known"})
     plain = make_session(views=4, illuminations=("white",), known_poses=False)
@@ -204,7 +209,7 @@ def test_source_choice_and_errors(
         calls.append(str(image_dir))
         return SfmResult({}, np.zeros((0, 3)), 0.0)
 
-    monkeypatch.setattr(poses, "run_sfm", sfm)
+    monkeypatch.setattr(poses_sfm, "run_sfm", sfm)
     with pytest.raises(RigError, match=r"only 0 of 4 views .*\(sfm\)"):
         _poses(plain)
     assert len(calls) == 1
