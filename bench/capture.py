@@ -179,8 +179,9 @@ def per_frame_overhead(profile: Path, template: Path, session: Path) -> dict[str
         on_frame=lambda _record: stamps.append(time.perf_counter()),
     )
     total = time.perf_counter() - t0
-    info = yaml.safe_load((session / "session.yaml").read_text())
-    boards = list((info.get("board_checks") or {}).values())
+    from core.session import Session
+
+    boards = list(Session.open(session).info.board_checks.values())
     intervals = np.diff(stamps)  # the first frame's time is the setup, reported apart
     cam = np.asarray(camera.seconds[1:])
     overhead_ms = (intervals - cam[: len(intervals)]) * 1e3

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -63,6 +63,17 @@ class Visibility:
 
     def counts(self) -> np.ndarray:
         return np.diff(self.indptr)
+
+    def matrix(self, views: Sequence[int]) -> np.ndarray:
+        """Bool (vertices, len(views)): whether each of ``views`` sees each vertex — the form
+        the optimiser takes; views not in the file see nothing."""
+        column = {int(v): k for k, v in enumerate(views)}
+        out = np.zeros((len(self.indptr) - 1, len(views)), dtype=bool)
+        rows, cols = self.pairs()
+        view_of = np.asarray(self.views)[cols]
+        known = np.isin(view_of, list(column))
+        out[rows[known], [column[int(v)] for v in view_of[known]]] = True
+        return out
 
     def save(self, path: Path) -> None:
         np.savez_compressed(path, indptr=self.indptr, indices=self.indices, depth=self.depth,

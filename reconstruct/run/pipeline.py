@@ -200,17 +200,10 @@ def optimiser_input(front: FrontResult, session: Session, basis: SpectralBasis) 
     intr = [_scaled(front.intrinsics[v], w, h) for v in views]
     rig = Rig(intr, [front.poses[v] for v in views], responses)
     mesh = front.mesh
-    vis = front.visibility
-    n = len(mesh.vertices)
-    matrix = np.zeros((n, len(views)), dtype=bool)
-    vi, col = vis.pairs()
-    view_of = np.asarray(vis.views)[col]
-    known = np.isin(view_of, views)
-    matrix[vi[known], [column[int(v)] for v in view_of[known]]] = True
     return OptimiseInput(
         vertices=np.asarray(mesh.vertices, dtype=float),
         faces=np.asarray(mesh.faces, dtype=np.int64),
-        visibility=matrix,
+        visibility=front.visibility.matrix(views),
         rig=rig,
         frames=frames,
         basis=basis,

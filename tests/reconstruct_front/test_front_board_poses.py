@@ -215,7 +215,7 @@ def test_source_choice_and_errors(
     assert len(calls) == 1
     # a board that poses too few views and no SfM: a clear error naming both
     monkeypatch.setattr(
-        poses, "run_sfm", lambda *_: (_ for _ in ()).throw(RigError("SfM found nothing", "x"))
+        poses_sfm, "run_sfm", lambda *_: (_ for _ in ()).throw(RigError("SfM found nothing", "x"))
     )
     with pytest.raises(RigError, match="board posed only .* SfM failed: SfM found nothing"):
         _poses(session_copy, {"board_min_corners": 500})
@@ -241,9 +241,9 @@ def test_board_frame_poses_send_the_board_to_the_mesh_stage(session_copy: Path) 
     from reconstruct.initial_mesh.stage import MeshConfig
     from reconstruct.run.front import _mesh_config
 
-    _poses(session_copy, {"board_with_sfm": False})
+    _, summary = _poses(session_copy, {"board_with_sfm": False})
     session = Session.open(session_copy)
-    conf = _mesh_config(MeshConfig(), session, session_copy / "recon" / "poses")
+    conf = _mesh_config(MeshConfig(), session, summary)
     assert conf.board_spec() == SPEC
     # known poses win in auto; they are in the board frame when its corners agree with them
     for shift, in_frame in ((0.0, True), (0.05, False)):
@@ -253,6 +253,6 @@ def test_board_frame_poses_send_the_board_to_the_mesh_stage(session_copy: Path) 
         )
         _, summary = _poses(session_copy)
         assert summary.source == "known" and summary.extra["board_frame"] is in_frame
-        conf = _mesh_config(MeshConfig(), session, session_copy / "recon" / "poses")
+        conf = _mesh_config(MeshConfig(), session, summary)
         assert (conf.board_spec() == SPEC) is in_frame
     assert summary.views["0"]["reprojection_px"] > 10  # the shifted poses miss the corners

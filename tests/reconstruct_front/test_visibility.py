@@ -82,3 +82,11 @@ def test_shadow_masks() -> None:
     vis = compute_visibility(mesh, {0: intr}, {0: side})
     lit = pair_shadow_mask(caster, v, n, vis, {0: side.center})
     assert lit.shape == vis.indices.shape and lit.all()  # light at the camera: no shadow seen
+
+
+def test_the_optimisers_matrix_has_one_column_per_requested_view() -> None:
+    # vertex 0 seen by views 2 and 7, vertex 1 by none, vertex 2 by view 7
+    vis = Visibility(np.array([0, 2, 2, 3]), np.array([0, 1, 1]), np.zeros(3), np.array([2, 7]))
+    matrix = vis.matrix([7, 3, 2])
+    assert matrix.dtype == bool and matrix.shape == (3, 3)
+    assert matrix.tolist() == [[True, False, True], [False, False, False], [True, False, False]]
