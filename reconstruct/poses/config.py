@@ -11,9 +11,9 @@ SOURCES = ("auto", "known", "board", "sfm")
 
 @dataclass(frozen=True)
 class PosesConfig:
-    """``source``: auto | known | board | sfm (see the module docstring); ``use_known``: let
-    ``auto`` read ``SESSION/poses`` when present; ``matcher``: exhaustive, sequential or auto
-    (exhaustive up to 60 views); ``max_features``: SIFT features per image;
+    """``source``: auto | known | board | sfm (see :mod:`reconstruct.poses.stage`);
+    ``use_known``: let ``auto`` read ``SESSION/poses`` when present; ``matcher``: exhaustive,
+    sequential or auto (exhaustive up to 60 views); ``max_features``: SIFT features per image;
     ``refine_intrinsics``: let bundle adjustment refine given intrinsics.
 
     Board: ``board_with_sfm`` also runs SfM and merges it in (``auto``: only when the board
