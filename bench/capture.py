@@ -179,8 +179,9 @@ def per_frame_overhead(profile: Path, template: Path, session: Path) -> dict[str
         on_frame=lambda _record: stamps.append(time.perf_counter()),
     )
     total = time.perf_counter() - t0
-    info = yaml.safe_load((session / "session.yaml").read_text())
-    boards = list((info.get("board_checks") or {}).values())
+    from core.session import Session
+
+    boards = list(Session.open(session).info.board_checks.values())
     intervals = np.diff(stamps)  # the first frame's time is the setup, reported apart
     cam = np.asarray(camera.seconds[1:])
     overhead_ms = (intervals - cam[: len(intervals)]) * 1e3
@@ -198,7 +199,8 @@ def per_frame_overhead(profile: Path, template: Path, session: Path) -> dict[str
 def component_times(template: Path, profile: Path, work: Path, repeats: int) -> dict[str, float]:
     """Median ms of the steps store_frame does per frame, each on its own, and of the checks
     (board: a view's first lit frame; exposure: each illumination's first frame)."""
-    from core.session import FrameRecord, append_manifest, fsync_dir, sha256_file
+    from core.files import fsync_dir, sha256_file
+    from core.manifest import FrameRecord, append_manifest
     from rig.capture.board_check import look_for_board
     from rig.capture.engine import BOARD_MIN_CORNERS
     from rig.capture.frames import check_exposure, read_raw
@@ -275,7 +277,7 @@ def kill_and_resume(
 ) -> dict[str, Any]:
     """SIGKILL a capture once ``kill_at`` frames are in the manifest, then time ``resume_cmd``
     from launch until the next frame is in the manifest; check the finished session."""
-    from core.session import read_manifest, verify_frames
+    from core.manifest import read_manifest, verify_frames
 
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL, "cwd": REPO}
     proc = subprocess.Popen(start_cmd, **quiet)  # type: ignore[call-overload]

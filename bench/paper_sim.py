@@ -129,8 +129,9 @@ def _inputs(session: Path, initial: Path | None, config: dict[str, Any]) -> tupl
     from reconstruct.run.front import run_front
     from reconstruct.run.pipeline import optimiser_input
 
-    front = run_front(session, {k: v for k, v in config.items() if k != "optimise"}, initial)
-    return front, optimiser_input(front, Session.open(session), default_basis())
+    opened = Session.open(session)
+    front = run_front(opened, {k: v for k, v in config.items() if k != "optimise"}, initial)
+    return front, optimiser_input(front, opened, default_basis())
 
 
 def _score(

@@ -30,7 +30,9 @@ from scipy.ndimage import maximum_filter
 
 from core.config import bounded, from_mapping
 from core.errors import RigError
-from core.session import FrameRecord, Session, verify_frames, write_bytes_atomically
+from core.files import write_bytes_atomically
+from core.manifest import MANIFEST_FILE, FrameRecord, verify_frames
+from core.session import Session
 from reconstruct.frames.raw import read_linear_rgb
 from reconstruct.run.stages import run_stage
 
@@ -253,10 +255,12 @@ def _sfm_score(illumination: str, rgb: np.ndarray, conf: DecodeConfig) -> float:
     return float(np.mean(rgb))
 
 
-def run(conf: DecodeConfig | Mapping[str, Any], session_dir: Path, out_dir: Path) -> Path:
-    """Decode every frame of the session into ``out_dir`` (resumable)."""
+def run(conf: DecodeConfig | Mapping[str, Any], session: Session | Path, out_dir: Path) -> Path:
+    """Decode every frame of the session (opened by the caller, or its folder) into
+    ``out_dir`` (resumable)."""
     conf = from_mapping(DecodeConfig, conf, "config", "decode")
-    session = Session.open(session_dir)
-    inputs = [session_dir / "manifest.jsonl"] + [session_dir / r.path for r in session.frames]
+    session = Session.of(session)
+    root = session.root
+    inputs = [root / MANIFEST_FILE] + [root / r.path for r in session.frames]
     run_stage("decode", asdict(conf), inputs, out_dir, lambda: _decode(session, conf, out_dir))
     return out_dir

@@ -31,11 +31,12 @@ import trimesh
 
 from core.config import bounded, from_mapping
 from core.errors import RigError
-from core.session import write_bytes_atomically
+from core.files import write_bytes_atomically
 from reconstruct.geometry.visibility import FILE as VIS_FILE
 from reconstruct.geometry.visibility import Visibility, VisibilityConfig, compute_visibility
 from reconstruct.initial_mesh.dense.poisson import largest_component, read_mesh
-from reconstruct.poses import stage as poses_stage
+from reconstruct.poses.output import PoseSet
+from reconstruct.poses.output import load as load_poses
 from reconstruct.run.stages import run_stage
 
 log = logging.getLogger("reconstruct.geometry.subdivide")
@@ -174,12 +175,12 @@ def subdivide(mesh: trimesh.Trimesh, steps: int) -> trimesh.Trimesh:
 
 
 def _subdivide(
-    mesh_path: Path, vis_path: Path, poses_dir: Path, conf: SubdivideConfig,
+    mesh_path: Path, vis_path: Path, posed: PoseSet, conf: SubdivideConfig,
     vis_conf: VisibilityConfig, out_dir: Path,
 ) -> None:
     mesh = read_mesh(mesh_path, process=True)
     trimesh.repair.fix_winding(mesh)
-    intrinsics, poses, _ = poses_stage.load(poses_dir)
+    intrinsics, poses, _ = posed
     target = target_edge_length(
         Visibility.load(vis_path), {v: float(i.K[0, 0]) for v, i in intrinsics.items()},
         conf.target_px,
@@ -216,13 +217,17 @@ def run(
     poses_dir: Path,
     out_dir: Path,
     vis_conf: VisibilityConfig | Mapping[str, Any] | None = None,
+    posed: PoseSet | None = None,
 ) -> Path:
-    """Subdivided mesh and its visibility into ``out_dir`` (resumable); returns the mesh."""
+    """Subdivided mesh and its visibility into ``out_dir`` (resumable); returns the mesh.
+    ``posed``: the poses stage's output when the caller has loaded it."""
     conf = from_mapping(SubdivideConfig, conf, "config", "subdivide")
     vconf = from_mapping(VisibilityConfig, vis_conf, "config", "visibility")
     inputs = [mesh_path, vis_path, poses_dir / "images.txt", poses_dir / "cameras.txt"]
     run_stage(
         "subdivide", asdict(conf) | {"visibility": asdict(vconf)}, inputs, out_dir,
-        lambda: _subdivide(mesh_path, vis_path, poses_dir, conf, vconf, out_dir),
+        lambda: _subdivide(
+            mesh_path, vis_path, posed or load_poses(poses_dir), conf, vconf, out_dir
+        ),
     )
     return out_dir / MESH

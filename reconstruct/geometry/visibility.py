@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -20,11 +20,12 @@ import numpy as np
 import trimesh
 
 from core.config import bounded, from_mapping
-from core.session import write_bytes_atomically
+from core.files import write_bytes_atomically
 from reconstruct.initial_mesh.dense.poisson import read_mesh
 from reconstruct.model.camera import Intrinsics, Pose, project
 from reconstruct.model.raycast import RayCaster
-from reconstruct.poses import stage as poses_stage
+from reconstruct.poses.output import PoseSet
+from reconstruct.poses.output import load as load_poses
 from reconstruct.run.progress import track
 from reconstruct.run.stages import run_stage
 
@@ -63,6 +64,17 @@ class Visibility:
 
     def counts(self) -> np.ndarray:
         return np.diff(self.indptr)
+
+    def matrix(self, views: Sequence[int]) -> np.ndarray:
+        """Bool (vertices, len(views)): whether each of ``views`` sees each vertex — the form
+        the optimiser takes; views not in the file see nothing."""
+        column = {int(v): k for k, v in enumerate(views)}
+        out = np.zeros((len(self.indptr) - 1, len(views)), dtype=bool)
+        rows, cols = self.pairs()
+        view_of = np.asarray(self.views)[cols]
+        known = np.isin(view_of, list(column))
+        out[rows[known], [column[int(v)] for v in view_of[known]]] = True
+        return out
 
     def save(self, path: Path) -> None:
         np.savez_compressed(path, indptr=self.indptr, indices=self.indices, depth=self.depth,
@@ -105,9 +117,9 @@ def compute_visibility(
     return Visibility(indptr, cols.astype(np.int32), z_all, views)
 
 
-def _visibility(mesh_path: Path, poses_dir: Path, conf: VisibilityConfig, out_dir: Path) -> None:
+def _visibility(mesh_path: Path, posed: PoseSet, conf: VisibilityConfig, out_dir: Path) -> None:
     mesh = read_mesh(mesh_path)
-    intrinsics, poses, _ = poses_stage.load(poses_dir)
+    intrinsics, poses, _ = posed
     vis = compute_visibility(mesh, intrinsics, poses, conf)
     vis.save(out_dir / FILE)
     counts = vis.counts()
@@ -120,11 +132,16 @@ def _visibility(mesh_path: Path, poses_dir: Path, conf: VisibilityConfig, out_di
 
 
 def run(
-    conf: VisibilityConfig | Mapping[str, Any], mesh_path: Path, poses_dir: Path, out_dir: Path
+    conf: VisibilityConfig | Mapping[str, Any],
+    mesh_path: Path,
+    poses_dir: Path,
+    out_dir: Path,
+    posed: PoseSet | None = None,
 ) -> Path:
-    """V(i) of ``mesh_path``'s vertices into ``out_dir/visibility.npz`` (resumable)."""
+    """V(i) of ``mesh_path``'s vertices into ``out_dir/visibility.npz`` (resumable);
+    ``posed``: the poses stage's output when the caller has loaded it."""
     conf = from_mapping(VisibilityConfig, conf, "config", "visibility")
     inputs = [mesh_path, poses_dir / "images.txt", poses_dir / "cameras.txt"]
     run_stage("visibility", asdict(conf), inputs, out_dir,
-              lambda: _visibility(mesh_path, poses_dir, conf, out_dir))
+              lambda: _visibility(mesh_path, posed or load_poses(poses_dir), conf, out_dir))
     return out_dir / FILE

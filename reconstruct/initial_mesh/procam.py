@@ -41,8 +41,10 @@ from rich.progress import track
 
 from core.config import bounded, from_mapping
 from core.errors import RigError
+from core.files import write_bytes_atomically
 from core.labels import REFERENCES, is_structured
-from core.session import FrameRecord, Session, write_bytes_atomically
+from core.manifest import FrameRecord
+from core.session import Session
 from reconstruct.frames.decode import INDEX, LINEAR_SUFFIXES, DecodeIndex, decode_linear, decode_raw
 from reconstruct.frames.decode import load_frame as load_decoded
 from reconstruct.initial_mesh.dense.poisson import poisson_mesh, write_oriented_ply
@@ -62,7 +64,7 @@ from reconstruct.initial_mesh.triangulation import (
     triangulate,
 )
 from reconstruct.model.camera import Intrinsics, Pose
-from reconstruct.poses import stage as poses_stage
+from reconstruct.poses.sfm import rescale
 from reconstruct.run.stages import run_stage
 
 log = logging.getLogger("reconstruct.initial_mesh.procam")
@@ -149,10 +151,7 @@ def projector_size(session: Session, conf: ProcamConfig) -> tuple[int, int] | No
     record (``session.yaml``)."""
     if conf.projector_size is not None:
         return (int(conf.projector_size[0]), int(conf.projector_size[1]))
-    res = (session.info.get("plan") or {}).get("projector_size") or (
-        (session.info.get("devices") or {}).get("projector") or {}
-    ).get("resolution")
-    return (int(res[0]), int(res[1])) if res else None
+    return session.info.projector_size
 
 
 def placements(session: Session, conf: ProcamConfig, views: list[int]) -> dict[int, Any]:
@@ -217,7 +216,7 @@ def _intrinsics_for(view: int, intrinsics: Intrinsics | Mapping[int, Intrinsics]
                     shape: tuple[int, int]) -> Intrinsics:
     intr = intrinsics if isinstance(intrinsics, Intrinsics) else intrinsics[view]
     h, w = shape
-    return intr if (intr.width, intr.height) == (w, h) else poses_stage.rescale(intr, w, h)
+    return intr if (intr.width, intr.height) == (w, h) else rescale(intr, w, h)
 
 
 def _triangulate_group(
@@ -276,8 +275,7 @@ def _procam(
     size = projector_size(session, conf)
     view_placement = placements(session, conf, views)
     plate = all(p is None for p in view_placement.values())
-    offset = np.asarray((session.info.get("light_mount") or {}).get("offset_m") or [0, 0, 0],
-                        dtype=float)
+    offset = np.asarray(session.info.light_offset_m or (0.0, 0.0, 0.0), dtype=float)
     if plate and not offset.any():
         raise RigError(
             f"{session.root / 'session.yaml'} gives no light_mount.offset_m for the projector "

@@ -29,7 +29,7 @@ from scipy.spatial import cKDTree
 
 from core.config import bounded, from_mapping
 from core.errors import RigError
-from core.session import write_bytes_atomically
+from core.files import write_bytes_atomically
 from reconstruct.frames.decode import INDEX, DecodeIndex, load_frame
 from reconstruct.initial_mesh.dense.board_silhouette import board_silhouette
 from reconstruct.initial_mesh.dense.patchmatch import (
@@ -48,8 +48,9 @@ from reconstruct.initial_mesh.dense.stereo import (
 from reconstruct.initial_mesh.dense.visual_hull import silhouette_votes, visual_hull_points
 from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.model.raycast import RayCaster
-from reconstruct.poses import stage as poses_stage
 from reconstruct.poses.board import BoardSpec
+from reconstruct.poses.output import POINTS, PoseSet
+from reconstruct.poses.output import load as load_poses
 from reconstruct.run.stages import run_stage
 
 log = logging.getLogger("reconstruct.initial_mesh.stage")
@@ -187,9 +188,9 @@ def brightest(grey: np.ndarray) -> np.ndarray:
 
 
 def dense_mesh(
-    decoded_dir: Path, poses_dir: Path, conf: MeshConfig, out_dir: Path
+    decoded_dir: Path, poses_dir: Path, conf: MeshConfig, out_dir: Path, posed: PoseSet
 ) -> tuple[trimesh.Trimesh, dict[str, Any]]:
-    intrinsics, poses, _ = poses_stage.load(poses_dir)
+    intrinsics, poses, _ = posed
     board = conf.board_spec()
     dilate_px = conf.mask_dilate_px
     if dilate_px is None:
@@ -206,7 +207,7 @@ def dense_mesh(
     (out_dir / "masks").mkdir(exist_ok=True)
     for view, mask in masks.items():
         cv2.imwrite(str(out_dir / "masks" / f"view_{view:04d}.png"), mask.astype(np.uint8) * 255)
-    sparse = np.load(poses_dir / poses_stage.POINTS)
+    sparse = np.load(poses_dir / POINTS)
 
     def hull(masks: dict[int, np.ndarray]) -> tuple[trimesh.Trimesh, np.ndarray, np.ndarray, float]:
         points, normals, voxel = visual_hull_points(
@@ -342,13 +343,19 @@ def unseen_hull_points(
 
 
 def _initial(
-    decoded_dir: Path, poses_dir: Path, conf: MeshConfig, out_dir: Path, user: Path | None
+    decoded_dir: Path,
+    poses_dir: Path,
+    conf: MeshConfig,
+    out_dir: Path,
+    user: Path | None,
+    posed: PoseSet | None,
 ) -> None:
     info: dict[str, Any]
     if user is not None:
         mesh, info = load_user_mesh(user), {"method": "given", "source": str(user)}
     else:
-        mesh, info = dense_mesh(decoded_dir, poses_dir, conf, out_dir)
+        posed = posed or load_poses(poses_dir)
+        mesh, info = dense_mesh(decoded_dir, poses_dir, conf, out_dir, posed)
     mesh.export(out_dir / MESH)
     info |= {"vertices": len(mesh.vertices), "faces": len(mesh.faces),
              "watertight": bool(mesh.is_watertight)}
@@ -363,8 +370,10 @@ def run(
     poses_dir: Path,
     out_dir: Path,
     initial_mesh: Path | None = None,
+    posed: PoseSet | None = None,
 ) -> Path:
-    """Write ``out_dir/initial.ply`` (resumable); returns its path."""
+    """Write ``out_dir/initial.ply`` (resumable); returns its path. ``posed``: the poses
+    stage's output when the caller has loaded it."""
     conf = conf if isinstance(conf, MeshConfig) else mesh_config(conf)
     inputs = [decoded_dir / INDEX, poses_dir / "images.txt", poses_dir / "cameras.txt"]
     if initial_mesh is not None:
@@ -373,6 +382,6 @@ def run(
         shutil.rmtree(out_dir)
     run_stage(
         "initial_mesh", asdict(conf) | {"given": str(initial_mesh)}, inputs, out_dir,
-        lambda: _initial(decoded_dir, poses_dir, conf, out_dir, initial_mesh),
+        lambda: _initial(decoded_dir, poses_dir, conf, out_dir, initial_mesh, posed),
     )
     return out_dir / MESH

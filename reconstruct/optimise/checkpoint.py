@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from core.session import fsync_dir
+from core.files import fsync_dir
 
 if TYPE_CHECKING:
     from reconstruct.optimise.steps import OptimiseInput, OptimiseSettings

@@ -41,7 +41,10 @@ from reconstruct.initial_mesh.procam import (
 from reconstruct.initial_mesh.stage import MeshConfig
 from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.poses import stage as poses
-from reconstruct.poses.stage import PosesConfig, PoseSummary
+from reconstruct.poses.board_sfm import session_board
+from reconstruct.poses.config import PosesConfig
+from reconstruct.poses.output import PoseSummary
+from reconstruct.poses.output import load as load_poses
 from reconstruct.run.stages import attach_log_file
 
 log = logging.getLogger("reconstruct")
@@ -116,27 +119,27 @@ def _lights(
     return lights, np.stack([lights[v] for v in sorted(pose_map)])
 
 
-def _mesh_config(conf: MeshConfig, session: Session, poses_dir: Path) -> MeshConfig:
+def _mesh_config(conf: MeshConfig, session: Session, summary: PoseSummary) -> MeshConfig:
     """Poses in the board's frame (board poses, or known poses the board's corners agree
     with): the silhouettes are cut against the board's known print (it is no dark
     background) and the hull kept above it."""
-    summary = poses.load(poses_dir)[2]
     in_board_frame = summary.source.startswith("board") or summary.extra.get("board_frame")
     if conf.board is not None or not in_board_frame:
         return conf
-    spec = poses.session_board(session.info)
+    spec = session_board(session.info)
     return conf if spec is None else replace(conf, board=spec.to_dict())
 
 
 def run_front(
-    session_dir: Path,
+    session: Session | Path,
     conf: FrontConfig | Mapping[str, Any] | None = None,
     initial_mesh_file: Path | None = None,
 ) -> FrontResult:
-    """Run (or resume) the five stages on a session directory."""
-    session_dir = Path(session_dir)
+    """Run (or resume) the five stages on a session (opened by the caller, or its folder).
+    The session is opened and the poses are loaded once here and handed to each stage."""
     conf = conf if isinstance(conf, FrontConfig) else FrontConfig.from_mapping(conf or {})
-    session = Session.open(session_dir)
+    session = Session.of(session)
+    session_dir = session.root
     projector = has_gray_code(session)
     recon = session_dir / RECON_DIR
     handler = attach_log_file(recon)
@@ -149,32 +152,35 @@ def run_front(
             transient=True, disable=not get_console().is_terminal,  # no blank line in a log
         ) as progress:
             task = progress.add_task("reconstruct: decode", total=5)
-            decode.run(conf.decode, session_dir, dirs["decoded"])
+            decode.run(conf.decode, session, dirs["decoded"])
             progress.update(task, advance=1, description="reconstruct: poses")
-            poses.run(conf.poses, session_dir, dirs["decoded"], dirs["poses"])
+            poses.run(conf.poses, session, dirs["decoded"], dirs["poses"])
+            posed = load_poses(dirs["poses"])
             progress.update(task, advance=1, description="reconstruct: initial mesh")
             if projector and initial_mesh_file is None:
-                cams, view_poses, _ = poses.load(dirs["poses"])
                 mesh0 = procam_initial_mesh(
-                    session, view_poses, cams, conf.procam, dirs["procam"],
+                    session, posed.poses, posed.intrinsics, conf.procam, dirs["procam"],
                     decoded_dir=dirs["decoded"],
                 )
             else:
                 mesh0 = initial_mesh.run(
-                    _mesh_config(conf.mesh, session, dirs["poses"]), dirs["decoded"],
-                    dirs["poses"], dirs["mesh"], initial_mesh_file,
+                    _mesh_config(conf.mesh, session, posed.summary), dirs["decoded"],
+                    dirs["poses"], dirs["mesh"], initial_mesh_file, posed,
                 )
             progress.update(task, advance=1, description="reconstruct: visibility")
-            vis0 = visibility.run(conf.visibility, mesh0, dirs["poses"], dirs["visibility"])
+            vis0 = visibility.run(
+                conf.visibility, mesh0, dirs["poses"], dirs["visibility"], posed
+            )
             progress.update(task, advance=1, description="reconstruct: subdivide")
             fine = subdivide.run(
-                conf.subdivide, mesh0, vis0, dirs["poses"], dirs["subdivide"], conf.visibility
+                conf.subdivide, mesh0, vis0, dirs["poses"], dirs["subdivide"], conf.visibility,
+                posed,
             )
             progress.update(task, advance=1)
     finally:
         log.removeHandler(handler)
         handler.close()
-    intrinsics, pose_map, summary = poses.load(dirs["poses"])
+    intrinsics, pose_map, summary = posed
     index = DecodeIndex.load(dirs["decoded"])
     frames = {
         (f.view, f.illumination): f

@@ -84,7 +84,7 @@ def captured_output(recon_dir: Path, native: bool = False, terminal: bool = True
 
 
 def run_logged(
-    session_dir: Path,
+    session: Session | Path,
     config: Mapping[str, Any] | None = None,
     initial_mesh: Path | None = None,
     verbosity: int = 0,
@@ -93,10 +93,10 @@ def run_logged(
 ) -> Reconstruction:
     """:func:`run_reconstruction` as the CLI runs it: chatter in ``recon/log.txt``, COLMAP's
     lines too unless ``verbosity >= 2``, the optimiser's iterations as progress bars (only
-    logged when ``terminal`` is false)."""
-    session = Session.open(Path(session_dir))  # a missing session fails before recon/ is made
+    logged when ``terminal`` is false); ``session`` opened by the caller, or its folder."""
+    session = Session.of(session)  # a missing session fails before recon/ is made
     with (
         captured_output(session.root / RECON_DIR, native=verbosity >= 2, terminal=terminal),
         IterationProgress.for_config(config, console, show=terminal) as iterations,
     ):
-        return run_reconstruction(session.root, config, initial_mesh, iterations)
+        return run_reconstruction(session, config, initial_mesh, iterations)

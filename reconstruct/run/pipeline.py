@@ -15,7 +15,6 @@ at most the stage in progress and never leaves old and new outputs mixed.
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 from collections.abc import Callable, Mapping
@@ -30,7 +29,7 @@ from calibration.grid import DEFAULT_GRID
 from calibration.store import CalibrationStore
 from core.errors import RigError
 from core.labels import AMBIENT
-from core.session import RECON_DIR, Session
+from core.session import Session
 from core.yamlio import read_yaml
 from reconstruct.frames.ambient import exposure_ratio, subtract_ambient
 from reconstruct.frames.decode import FLOAT16_RANGE, load_frame
@@ -48,7 +47,7 @@ from reconstruct.outputs.relight import Camera, encode_srgb, relight
 from reconstruct.run.front import FrontConfig, FrontResult, run_front
 from reconstruct.run.memory import peak_rss_mb, reset_peak_rss
 from reconstruct.run.publish import publish, staging_dir
-from reconstruct.run.stages import TIMINGS, record_timing
+from reconstruct.run.stages import Timings, timed_run
 from reconstruct.run.status import RunStatus, tracked
 
 log = logging.getLogger("reconstruct")
@@ -91,19 +90,18 @@ def load_config(path: Path | None) -> dict[str, Any]:
 def session_spectra(session: Session, names: list[str]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Camera sensitivity and the SPD of each illumination from the session's calibration
     snapshot (entries named in ``session.yaml`` → ``calibration``)."""
-    cal = session.info.get("calibration") or {}
-    if not session.calibration_dir.is_dir() or "camera" not in cal:
+    cal = session.info.calibration
+    if not session.calibration_dir.is_dir() or cal.camera is None:
         raise RigError(
             f"{session.root} has no calibration snapshot (calibration/ and session.yaml "
             "calibration.camera)",
             "capture with a profile that names a calibration store",
         )
     store = CalibrationStore(session.calibration_dir)
-    camera = store.camera(str(cal["camera"]), DEFAULT_GRID)
-    lights = cal.get("lights") or {}
+    camera = store.camera(cal.camera, DEFAULT_GRID)
     spds = {}
     for name in names:
-        entry = str(lights.get(name, name))
+        entry = cal.lights.get(name, name)
         if entry not in store.names("light"):
             raise RigError(
                 f"illumination {name!r} has no SPD in {session.calibration_dir} (entry {entry!r})",
@@ -158,8 +156,8 @@ def optimiser_input(front: FrontResult, session: Session, basis: SpectralBasis) 
     """Arrays the optimiser needs from the front's outputs and the calibration snapshot."""
     views = sorted(front.poses)
     column = {v: k for k, v in enumerate(views)}
-    plan = (session.info.get("plan") or {}).get("illuminations")
-    lit = set(plan) if isinstance(plan, list) else None  # ambient / pattern frames are not lit
+    plan = session.info.plan.illuminations
+    lit = None if plan is None else set(plan)  # ambient / pattern frames are not lit
     keys = sorted(k for k in front.frames if k[0] in column and (lit is None or k[1] in lit))
     if not keys:
         raise RigError(
@@ -198,17 +196,10 @@ def optimiser_input(front: FrontResult, session: Session, basis: SpectralBasis) 
     intr = [_scaled(front.intrinsics[v], w, h) for v in views]
     rig = Rig(intr, [front.poses[v] for v in views], responses)
     mesh = front.mesh
-    vis = front.visibility
-    n = len(mesh.vertices)
-    matrix = np.zeros((n, len(views)), dtype=bool)
-    vi, col = vis.pairs()
-    view_of = np.asarray(vis.views)[col]
-    known = np.isin(view_of, views)
-    matrix[vi[known], [column[int(v)] for v in view_of[known]]] = True
     return OptimiseInput(
         vertices=np.asarray(mesh.vertices, dtype=float),
         faces=np.asarray(mesh.faces, dtype=np.int64),
-        visibility=matrix,
+        visibility=front.visibility.matrix(views),
         rig=rig,
         frames=frames,
         basis=basis,
@@ -223,7 +214,9 @@ def export_result(
     extra: dict[str, Any],
     preview_views: int = 3,
 ) -> tuple[list[Path], dict[str, Any], Path, Path, Path]:
-    """Write mesh.ply, reflectance.npz, report.json and the plots."""
+    """Write mesh.ply, reflectance.npz, the plots and last report.json, with this export's
+    seconds (and, when ``extra`` has ``peak_rss_mb``, its peak memory) in it."""
+    started = time.perf_counter()
     recon_dir.mkdir(parents=True, exist_ok=True)
     wl = inp.basis.wavelengths_nm
     normals, _ = vertex_normals(result.vertices, result.faces)
@@ -329,6 +322,9 @@ def export_result(
         "settings": asdict(settings),
         **extra,
     }
+    report["timings_s"]["export"] = time.perf_counter() - started
+    if "peak_rss_mb" in report:
+        report["peak_rss_mb"]["export"] = round(peak_rss_mb(), 1)
     report_path = export.write_report(recon_dir / export.REPORT_FILE, report)
     return figures, report, mesh_path, npz, report_path
 
@@ -383,38 +379,24 @@ def projector_lights(
 
 
 def run_reconstruction(
-    session_dir: Path,
+    session: Session | Path,
     config: Mapping[str, Any] | None = None,
     initial_mesh: Path | None = None,
     progress: Progress | None = None,
     basis: SpectralBasis | None = None,
 ) -> Reconstruction:
-    """Both halves of the pipeline on a session; outputs in ``SESSION/recon/``."""
-    session_dir = Path(session_dir)
+    """Both halves of the pipeline on a session (opened by the caller, or its folder; opened
+    once either way); outputs in ``SESSION/recon/``."""
     conf = dict(config or {})
     opt_conf = conf.pop("optimise", None)
-    settings = OptimiseSettings.from_mapping(opt_conf)
-    session = Session.open(session_dir)
-    recon = session_dir / RECON_DIR
-    with tracked(recon) as status:
-        rec = _run(session, conf, opt_conf, settings, initial_mesh, progress, basis, status)
+    settings = OptimiseSettings.from_mapping(opt_conf, "config optimise")
+    session = Session.of(session)
+    with tracked(session.recon_dir) as status, timed_run(session.recon_dir) as timings:
+        rec = _run(session, conf, opt_conf, settings, initial_mesh, progress, basis, status,
+                   timings)
         if rec.report["skipped_frames"]:
             status.end("complete", skipped_frames=len(rec.report["skipped_frames"]))
     return rec
-
-
-def front_peaks(recon: Path) -> dict[str, float | None]:
-    """Each front stage's peak resident memory (MB) from ``timings.json``; None for a stage
-    this run skipped (done before)."""
-    try:
-        timings = json.loads((recon / TIMINGS).read_text())
-    except (OSError, ValueError):
-        return {}
-    return {
-        name: entry.get("peak_rss_mb")
-        for name, entry in timings.items()
-        if isinstance(entry, dict) and name not in ("optimise", "export")
-    }
 
 
 def _run(
@@ -426,12 +408,12 @@ def _run(
     progress: Progress | None,
     basis: SpectralBasis | None,
     status: RunStatus,
+    timings: Timings,
 ) -> Reconstruction:
-    session_dir = session.root
     t0 = time.perf_counter()
     status.stage("front")
     front = run_front(
-        session_dir, {k: v for k, v in conf.items() if k in FRONT_SECTIONS}, initial_mesh
+        session, {k: v for k, v in conf.items() if k in FRONT_SECTIONS}, initial_mesh
     )
     t_front = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -440,15 +422,15 @@ def _run(
     t_load = time.perf_counter() - t0
     distances = camera_distances(inp)
     warn_if_light_distance_weak(distances, settings.light_mode)
-    recon = session_dir / RECON_DIR
+    recon = session.recon_dir
     t0 = time.perf_counter()
     status.stage("optimise")
     checkpoint = Checkpoint(recon / "optimise" / CHECKPOINT_FILE, input_key(inp, settings))
     reset_peak_rss()
     result = optimise(inp, settings, progress, checkpoint)
-    peaks = {**front_peaks(recon), "optimise": round(peak_rss_mb(), 1)}
-    record_timing(recon, "optimise", time.perf_counter() - t0, False, peaks["optimise"])
-    t0 = time.perf_counter()
+    # None for a front stage this run skipped (done before)
+    peaks = {**timings.peaks(leave_out=("optimise", "export")), "optimise": round(peak_rss_mb(), 1)}
+    timings.record("optimise", time.perf_counter() - t0, False, peaks["optimise"])
     reset_peak_rss()
     absolute = front.scale_is_metric
     extra = {
@@ -472,12 +454,9 @@ def _run(
     figures, report, mesh_path, npz, report_path = export_result(
         staging, inp, result, settings, extra
     )
-    report["timings_s"]["export"] = time.perf_counter() - t0
-    report["peak_rss_mb"]["export"] = round(peak_rss_mb(), 1)
-    export.write_report(report_path, report)
     publish(recon, staging)
-    record_timing(
-        recon, "export", report["timings_s"]["export"], False, report["peak_rss_mb"]["export"]
+    timings.record(
+        "export", report["timings_s"]["export"], False, report["peak_rss_mb"]["export"]
     )
     mesh_path, npz, report_path = (recon / p.name for p in (mesh_path, npz, report_path))
     figures = [recon / p.name for p in figures]

@@ -13,7 +13,7 @@ import json
 import shutil
 from pathlib import Path
 
-from core.session import fsync_dir, write_bytes_atomically
+from core.files import fsync_dir, write_bytes_atomically
 
 STAGING = ".export-new"
 OLD = ".export-old"

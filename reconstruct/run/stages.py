@@ -3,9 +3,10 @@
 Each stage is ``run(conf, inputs, out_dir) -> Path``. :func:`run_stage` wraps the work: it
 skips when ``out_dir`` holds a stamp whose hash matches the stage's configuration and its
 input files (path, size, mtime), and otherwise runs it, writes the stamp last (so an
-interrupted stage re-runs) and records the wall time in ``recon/timings.json``, which the
-report reads. Hashing size+mtime rather than content keeps resuming cheap; frame contents
-are checked against the manifest's sha256 by the decode stage.
+interrupted stage re-runs) and records the wall time in ``recon/timings.json``: within
+:func:`timed_run` (one reconstruction) in memory, the file written once at its end. Hashing
+size+mtime rather than content keeps resuming cheap; frame contents are checked against the
+manifest's sha256 by the decode stage.
 """
 
 from __future__ import annotations
@@ -17,11 +18,12 @@ import os
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from core.session import write_bytes_atomically
+from core.files import write_bytes_atomically
 from reconstruct.run.memory import peak_rss_mb, reset_peak_rss
 
 log = logging.getLogger("reconstruct")
@@ -73,25 +75,72 @@ def is_done(out_dir: Path, digest: str) -> bool:
         return False
 
 
+class Timings:
+    """``recon/timings.json``: each stage's wall time and peak resident memory
+    (:mod:`reconstruct.run.memory`), earlier runs' entries kept for stages this run did not
+    reach."""
+
+    def __init__(self, recon_dir: Path) -> None:
+        self.path = recon_dir / TIMINGS
+        self.data: dict[str, Any] = {}
+        if self.path.is_file():
+            try:
+                self.data = json.loads(self.path.read_text())
+            except json.JSONDecodeError:
+                self.data = {}
+
+    def record(
+        self, name: str, seconds: float, skipped: bool, peak_rss_mb: float | None = None
+    ) -> None:
+        self.data[name] = {
+            "seconds": round(seconds, 3),
+            "skipped": skipped,
+            "peak_rss_mb": None if peak_rss_mb is None else round(peak_rss_mb, 1),
+            "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        }
+
+    def peaks(self, leave_out: Iterable[str] = ()) -> dict[str, float | None]:
+        """Peak resident memory (MB) of each stage with an entry, but those in ``leave_out``."""
+        skip = set(leave_out)
+        return {
+            name: entry.get("peak_rss_mb")
+            for name, entry in self.data.items()
+            if isinstance(entry, dict) and name not in skip
+        }
+
+    def write(self) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        write_bytes_atomically(self.path, json.dumps(self.data, indent=2).encode())
+
+
+_RUN_TIMINGS: ContextVar[Timings | None] = ContextVar("run_timings", default=None)
+
+
+@contextmanager
+def timed_run(recon_dir: Path) -> Iterator[Timings]:
+    """Collect the timings of every stage run inside the block; write them once at its end
+    (also when it fails, so a resumed run's report still sees what finished)."""
+    timings = Timings(recon_dir)
+    token = _RUN_TIMINGS.set(timings)
+    try:
+        yield timings
+    finally:
+        _RUN_TIMINGS.reset(token)
+        timings.write()
+
+
 def record_timing(
     recon_dir: Path, name: str, seconds: float, skipped: bool, peak_rss_mb: float | None = None
 ) -> None:
-    """Add one stage's wall time (and its peak resident memory, :mod:`reconstruct.run.memory`)
-    to ``recon/timings.json`` (read by the report)."""
-    path = recon_dir / TIMINGS
-    data: dict[str, Any] = {}
-    if path.is_file():
-        try:
-            data = json.loads(path.read_text())
-        except json.JSONDecodeError:
-            data = {}
-    data[name] = {
-        "seconds": round(seconds, 3),
-        "skipped": skipped,
-        "peak_rss_mb": None if peak_rss_mb is None else round(peak_rss_mb, 1),
-        "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-    }
-    write_bytes_atomically(path, json.dumps(data, indent=2).encode())
+    """Add one stage's wall time to the run's timings (inside :func:`timed_run`), else straight
+    to ``recon/timings.json`` (a stage run alone)."""
+    timings = _RUN_TIMINGS.get()
+    if timings is not None:
+        timings.record(name, seconds, skipped, peak_rss_mb)
+        return
+    alone = Timings(recon_dir)
+    alone.record(name, seconds, skipped, peak_rss_mb)
+    alone.write()
 
 
 def run_stage(

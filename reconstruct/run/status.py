@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from core.errors import RigError
-from core.session import write_bytes_atomically
+from core.files import write_bytes_atomically
 
 log = logging.getLogger("reconstruct")
 

@@ -11,7 +11,9 @@ from rich.console import Console
 from rich.markup import escape
 
 from core.errors import RigError
-from core.session import POSES_DIR, SESSION_FILE, FrameRecord
+from core.manifest import FrameRecord
+from core.session import POSES_DIR, SESSION_FILE
+from core.session_info import PlanInfo, SessionInfo
 from rig.capture.devices import Ask, RigDevices, open_devices
 from rig.capture.engine import CaptureStopped, RunEngine, RunState
 from rig.capture.resume import prepare_resume
@@ -29,7 +31,7 @@ from rig.capture.session_dir import (
     write_info,
 )
 from rig.capture.trust import confirm_session_devices, stdin_is_tty
-from rig.plans import FrameSpec, frame_list
+from rig.plans import frame_list
 from rig.profile import Profile, load_profile
 
 __all__ = ["CaptureStopped", "DeviceFactory", "run_capture"]
@@ -70,11 +72,15 @@ def run_capture(
         if profile is not None and not isinstance(profile, Profile):
             console.print("[dim]resuming with the session's own profile snapshot[/]")
         profile = snapshot_profile(out)
-        seed = int(info.get("seed", 0)) if seed is None else seed
+        typed = SessionInfo.from_mapping(info, str(out / SESSION_FILE))
+        recorded = typed.plan
+        seed = (typed.seed or 0) if seed is None else seed
         confirm_session_devices(
             out, profile, trusted=trust_devices, ask=prompt, interactive=interactive
         )
-        records = prepare_resume(out, _recorded_plan(profile, info), _warner(console))
+        records = prepare_resume(
+            out, frame_list(profile.plan, recorded.projector_size), _warner(console)
+        )
     else:
         if profile is None:
             raise RigError(
@@ -87,6 +93,7 @@ def run_capture(
         seed = 0 if seed is None else seed
         check_new_session_dir(out)
         info = None
+        recorded = None
         records = []
     devices = open_rig(profile, seed, prompt)
     try:
@@ -95,8 +102,8 @@ def run_capture(
         if info is None:
             info = _start_session(out, profile, devices, seed, len(frames), size)
             info["notes"] = notes
-        else:
-            _check_same_plan(out, info, len(frames), size)
+        elif recorded is not None:
+            _check_same_plan(out, recorded, len(frames), size)
         state = RunState(
             done={r.frame for r in records},
             total=len(frames),
@@ -144,12 +151,6 @@ def run_capture(
     return out
 
 
-def _recorded_plan(profile: Profile, info: dict[str, Any]) -> list[FrameSpec]:
-    """The session's frames as planned when it started (before any device is opened)."""
-    size = (info.get("plan") or {}).get("projector_size")
-    return frame_list(profile.plan, tuple(size) if size else None)
-
-
 def _warner(console: Console) -> Callable[[str], None]:
     return lambda text: console.print(f"[yellow]resume:[/] {escape(text)}", highlight=False)
 
@@ -174,15 +175,14 @@ def _start_session(
 
 
 def _check_same_plan(
-    out: Path, info: dict[str, Any], n_frames: int, projector_size: tuple[int, int] | None
+    out: Path, plan: PlanInfo, n_frames: int, projector_size: tuple[int, int] | None
 ) -> None:
     """Frame numbers are only the resume point if the plan expands the same way."""
-    plan = info.get("plan", {})
-    recorded = plan.get("projector_size")
-    if plan.get("frames") != n_frames or (recorded and tuple(recorded) != projector_size):
+    recorded = plan.projector_size
+    if plan.frames != n_frames or (recorded and recorded != projector_size):
         raise RigError(
             f"{out}: the rig now plans {n_frames} frames (projector {projector_size}), the "
-            f"session was started with {plan.get('frames')} (projector {recorded})",
+            f"session was started with {plan.frames} (projector {recorded})",
             "resume with the same projector resolution, or start a new session",
         )
 
@@ -225,7 +225,7 @@ def _new_info(
             if profile.light_mount.offset_m
             else None,
         },
-        # reconstruct.poses.stage reads the camera-centre distances as this list (metric scale)
+        # reconstruct.poses.sfm reads the camera-centre distances as this list (metric scale)
         "known_distances": [pair.as_dict() for pair in profile.camera_pairs],
         "known_lengths": dict(profile.known_distances),
         "calibration": calibration,

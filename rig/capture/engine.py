@@ -25,7 +25,8 @@ from rich.progress import (
 )
 
 from core.errors import RigError
-from core.session import RAW_DIR, FrameRecord
+from core.manifest import FrameRecord
+from core.session import RAW_DIR
 from drivers.protocols import LightSource
 from rig.capture.board_check import look_for_board
 from rig.capture.devices import Ask, RigDevices, device_errors

@@ -11,13 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from core.errors import RigError
-from core.session import (
-    RAW_DIR,
-    FrameRecord,
-    append_manifest,
-    fsync_dir,
-    sha256_file,
-)
+from core.files import fsync_dir, sha256_file
+from core.manifest import FrameRecord, append_manifest
+from core.session import RAW_DIR
 from drivers.protocols import CapturedFrame
 from rig.plans import FrameSpec
 

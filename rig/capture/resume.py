@@ -19,16 +19,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from core.errors import RigError
-from core.session import (
-    MANIFEST_FILE,
-    RAW_DIR,
-    FrameRecord,
-    append_manifest,
-    fsync_dir,
-    read_manifest,
-    sha256_file,
-    write_bytes_atomically,
-)
+from core.files import fsync_dir, sha256_file, write_bytes_atomically
+from core.manifest import MANIFEST_FILE, FrameRecord, append_manifest, read_manifest
+from core.session import RAW_DIR
 from rig.capture.frames import INCOMING, frame_name, record_paths, verify_file
 from rig.plans import FrameSpec
 

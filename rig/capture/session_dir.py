@@ -14,14 +14,9 @@ from typing import Any
 import yaml
 
 from core.errors import RigError
-from core.session import (
-    CALIBRATION_DIR,
-    MANIFEST_FILE,
-    POSES_DIR,
-    RAW_DIR,
-    SESSION_FILE,
-    write_bytes_atomically,
-)
+from core.files import write_bytes_atomically
+from core.manifest import MANIFEST_FILE
+from core.session import CALIBRATION_DIR, POSES_DIR, RAW_DIR, SESSION_FILE
 from core.yamlio import load_yaml
 from rig import __version__
 from rig.capture.frames import INCOMING

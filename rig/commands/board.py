@@ -12,7 +12,7 @@ from pathlib import Path
 from rich.console import Console
 
 from core.errors import RigError
-from core.session import write_bytes_atomically
+from core.files import write_bytes_atomically
 from reconstruct.poses.board import PAPER_SIZES_M, BoardSpec, write_sheet
 from reconstruct.poses.board.spec import DEFAULT_DICTIONARY, DEFAULT_MARKER_RATIO, DEFAULT_SQUARES
 from rig.outpaths import output_file

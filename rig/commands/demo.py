@@ -19,7 +19,7 @@ from core.errors import RigError
 from reconstruct.model.camera import read_colmap_text
 from reconstruct.outputs.evaluate import evaluate, load_mesh, surface_distance
 from reconstruct.poses.board import umeyama
-from reconstruct.poses.stage import SUMMARY as POSE_SUMMARY
+from reconstruct.poses.output import SUMMARY as POSE_SUMMARY
 from reconstruct.run.logfile import run_logged
 from rig.capture import run_capture
 from rig.demo_profile import demo_profile

@@ -83,9 +83,9 @@ def handle(args: argparse.Namespace) -> int:
             f"--initial-mesh {args.initial_mesh} is not a file", "give a PLY, OBJ, STL, OFF or GLB"
         )
     config = load_config(args.config)
-    Session.open(args.session)  # a wrong path fails now, not after the kernel warm-up
+    session = Session.open(args.session)  # a wrong path fails now, not after the warm-up
     compile_kernels_once(console)
-    rec = run_logged(args.session, config, args.initial_mesh, args.verbose, console)
+    rec = run_logged(session, config, args.initial_mesh, args.verbose, console)
     summary(console, rec)
     print(rec.recon_dir)
     skipped = rec.report["skipped_frames"]

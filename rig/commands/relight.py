@@ -13,7 +13,7 @@ from core.errors import RigError
 from core.session import RECON_DIR
 from reconstruct.outputs import export
 from reconstruct.outputs.relight import Camera, encode_srgb, load_camera_file, relight, write_png
-from reconstruct.poses.stage import load as load_poses
+from reconstruct.poses.output import load as load_poses
 from rig.outpaths import output_file
 
 

@@ -10,7 +10,9 @@ from typing import Any
 
 from rich.console import Console
 
-from core.session import FrameProblem, Session, sha256_file, verify_frames
+from core.files import sha256_file
+from core.manifest import FrameProblem, verify_frames
+from core.session import Session
 from rig.capture.frames import INCOMING, record_paths
 from rig.capture.resume import QUARANTINE_DIR, REASONS_FILE
 
@@ -44,8 +46,8 @@ def handle_verify(args: argparse.Namespace) -> int:
         )
     for frame in duplicates:
         console.print(f"duplicate      frame {frame} appears {counts[frame]} times")
-    planned = session.info.get("plan", {}).get("frames")
-    missing_planned = (planned - len(counts)) if isinstance(planned, int) else 0
+    planned = session.info.plan.frames
+    missing_planned = (planned - len(counts)) if planned is not None else 0
     strays = stray_files(session)
     for line in strays:
         console.print(line, highlight=False)
@@ -86,8 +88,8 @@ def stray_files(session: Session) -> list[str]:
             for f in sorted(quarantine.iterdir())
             if f.is_file() and f.name != REASONS_FILE and not f.name.startswith("manifest-")
         ]
-    views = session.info.get("plan", {}).get("views")
-    if isinstance(views, int):
+    views = session.info.plan.views
+    if views is not None:
         lines += [
             f"off-plan       frame {r.frame}: view {r.view} (the plan has {views} views)"
             for r in session.frames
@@ -119,8 +121,8 @@ def handle_info(args: argparse.Namespace) -> int:
 
 def summarise(session: Session) -> list[str]:
     """Human-readable summary lines of a session."""
-    info: dict[str, Any] = session.info
-    plan = info.get("plan", {})
+    info = session.info
+    plan = info.plan
     frames = session.frames
     by_label = Counter(f.illumination for f in frames)
     size = sum(
@@ -131,41 +133,45 @@ def summarise(session: Session) -> list[str]:
     )
     rows: list[tuple[str, str]] = [
         ("session", str(session.root)),
-        ("profile", f"{info.get('profile_name', '?')} ({info.get('profile_source', '?')})"),
-        ("created", str(info.get("created", "?"))),
-        ("views", f"{len(session.views())} of {plan.get('views', '?')} planned"),
+        ("profile", f"{info.profile_name or '?'} ({info.profile_source or '?'})"),
+        ("created", info.created or "?"),
+        ("views", f"{len(session.views())} of {_or_unknown(plan.views)} planned"),
         ("illuminations", ", ".join(f"{k} ×{v}" for k, v in sorted(by_label.items())) or "-"),
-        ("frames", f"{len(frames)} of {plan.get('frames', '?')} planned, {size / 1e6:.1f} MB"),
+        ("frames", f"{len(frames)} of {_or_unknown(plan.frames)} planned, {size / 1e6:.1f} MB"),
         ("duration", _duration(frames)),
     ]
-    runs = info.get("runs", [])
+    runs = info.runs
     if runs:
         rows.append(("runs", f"{len(runs)}: " + ", ".join(str(r.get("status")) for r in runs)))
-    for kind, desc in (info.get("devices") or {}).items():
+    for kind, desc in info.devices.items():
         desc = dict(desc)
         driver = desc.pop("driver", "?")
         details = ", ".join(f"{k}={v}" for k, v in desc.items() if not isinstance(v, (dict, list)))
         rows.append((kind, f"{driver}: {details}"))
-    cal = info.get("calibration", {}) or {}
-    if cal.get("snapshot"):
-        lights = ", ".join(f"{k}->{v}" for k, v in (cal.get("lights") or {}).items())
+    cal = info.calibration
+    if cal.snapshot:
+        lights = ", ".join(f"{k}->{v}" for k, v in cal.lights.items())
         rows.append(
             (
                 "calibration",
-                f"{cal.get('store')} (snapshot in {cal['snapshot']}/): camera "
-                f"{cal.get('camera')}; lights {lights}",
+                f"{cal.store} (snapshot in {cal.snapshot}/): camera {cal.camera}; "
+                f"lights {lights}",
             )
         )
     else:
         rows.append(("calibration", "none recorded"))
-    for check in (info.get("exposure_checks") or {}).values():
-        if check.get("suggestion"):
+    for check in info.exposure_checks.values():
+        if isinstance(check, dict) and check.get("suggestion"):
             rows.append(("exposure", check["suggestion"]))
-    if info.get("notes"):
-        rows.append(("notes", str(info["notes"])))
-    if info.get("ground_truth"):
-        rows.append(("ground truth", f"{info['ground_truth']}/ (simulated rig)"))
+    if info.notes:
+        rows.append(("notes", info.notes))
+    if info.ground_truth:
+        rows.append(("ground truth", f"{info.ground_truth}/ (simulated rig)"))
     return [f"{label:<14}{value}" for label, value in rows]
+
+
+def _or_unknown(count: int | None) -> str:
+    return "?" if count is None else str(count)
 
 
 def _duration(frames: list[Any]) -> str:

@@ -10,7 +10,8 @@ import numpy as np
 import trimesh
 import yaml
 
-from core.session import FrameRecord, append_manifest, sha256_file
+from core.files import sha256_file
+from core.manifest import FrameRecord, append_manifest
 from reconstruct.model.camera import Intrinsics, Pose, write_colmap_text
 from reconstruct.model.raycast import RayCaster
 

@@ -8,7 +8,7 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-from core.session import read_manifest, verify_frames
+from core.manifest import read_manifest, verify_frames
 
 PROFILE = Path(__file__).with_name("sim-small.yaml")
 FRAMES = 4 * 4

@@ -13,7 +13,8 @@ import rawpy
 
 from core.config import from_mapping
 from core.errors import RigError
-from core.session import FrameRecord, append_manifest, sha256_file
+from core.files import sha256_file
+from core.manifest import FrameRecord, append_manifest
 from reconstruct.frames import decode
 from reconstruct.frames.decode import DecodeConfig, DecodeIndex, decode_raw, load_frame
 from reconstruct.frames.raw import read_linear_rgb, read_mosaic

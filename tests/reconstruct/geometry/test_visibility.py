@@ -63,3 +63,11 @@ def test_out_of_frustum_is_not_visible() -> None:
     pose = Pose.look_at(np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]), up=(0.0, 1.0, 0.0))
     vis = compute_visibility(mesh, {0: intr}, {0: pose})
     assert vis.counts().sum() == 0
+
+
+def test_the_optimisers_matrix_has_one_column_per_requested_view() -> None:
+    # vertex 0 seen by views 2 and 7, vertex 1 by none, vertex 2 by view 7
+    vis = Visibility(np.array([0, 2, 2, 3]), np.array([0, 1, 1]), np.zeros(3), np.array([2, 7]))
+    matrix = vis.matrix([7, 3, 2])
+    assert matrix.dtype == bool and matrix.shape == (3, 3)
+    assert matrix.tolist() == [[True, False, True], [False, False, False], [True, False, False]]

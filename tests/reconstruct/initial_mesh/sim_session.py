@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from core.session import FrameRecord, append_manifest, sha256_file
+from core.files import sha256_file
+from core.manifest import FrameRecord, append_manifest
 from drivers.projectors.patterns import gray_code_sequence
 from drivers.sim import SimRig
 from reconstruct.model.camera import Intrinsics, Pose

@@ -13,7 +13,8 @@ import trimesh
 import yaml
 
 from core.errors import RigError
-from core.session import FrameRecord, append_manifest, sha256_file
+from core.files import sha256_file
+from core.manifest import FrameRecord, append_manifest
 from drivers.sim.rig import SimRig
 from reconstruct.frames import decode
 from reconstruct.frames.decode import DecodeIndex, load_frame

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,8 @@ import trimesh
 
 from core.config import from_mapping
 from core.errors import RigError
-from core.session import FrameRecord, Session, append_manifest
+from core.manifest import FrameRecord, append_manifest
+from core.session import Session
 from reconstruct.frames import decode
 from reconstruct.initial_mesh.procam import (
     LIGHTS,
@@ -96,7 +98,7 @@ def test_plate_mode_needs_offset_and_focal(tmp_path: Path) -> None:
     poses, _, _ = sim_session.layout(plate=True)
     with pytest.raises(RigError, match="light_mount.offset_m"):
         procam_initial_mesh(session, {0: poses[0]}, sim_session.intrinsics(), {}, tmp_path / "o")
-    session.info["light_mount"] = {"type": "plate", "offset_m": [0.05, 0.0, 0.0]}
+    session.info = replace(session.info, light_offset_m=(0.05, 0.0, 0.0))
     with pytest.raises(RigError, match="projector_focal_px"):
         procam_initial_mesh(session, {0: poses[0]}, sim_session.intrinsics(), {}, tmp_path / "o")
 

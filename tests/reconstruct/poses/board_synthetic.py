@@ -12,10 +12,11 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from core.session import FrameRecord, append_manifest, sha256_file
+from core.files import sha256_file
+from core.manifest import FrameRecord, append_manifest
 from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.poses.board import BoardSpec, Similarity, board_texture
-from reconstruct.poses.stage import SfmResult, rescale
+from reconstruct.poses.sfm import SfmResult, rescale
 from tests.reconstruct.poses.conftest import PX_PER_M, Scene, orbit_poses, render
 
 SPEC = BoardSpec.fit_paper("A4")

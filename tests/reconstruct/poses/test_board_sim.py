@@ -10,12 +10,14 @@ import numpy as np
 import pytest
 import yaml
 
-from core.session import FrameRecord, append_manifest, sha256_file
+from core.files import sha256_file
+from core.manifest import FrameRecord, append_manifest
 from drivers.sim.rig import SimRig
 from reconstruct.frames import decode
 from reconstruct.model.camera import read_colmap_text
 from reconstruct.poses import stage as poses
 from reconstruct.poses.board import BoardSpec, board_texture
+from reconstruct.poses.output import load as load_poses
 
 SPEC = BoardSpec.fit_paper("A3")  # 10x7 squares of 39 mm, as profiles/sim.yaml
 
@@ -59,7 +61,7 @@ def test_sim_board_and_sfm_poses(tmp_path: Path) -> None:
     # views with fewer than 20 corners get no board pose: SfM poses them in the board frame
     out = poses.run({"board_min_corners": 20}, root, root / "recon" / "decoded",
                     root / "recon" / "poses")
-    _, found, summary = poses.load(out)
+    _, found, summary = load_poses(out)
     _, truth = read_colmap_text(root / "truth" / "poses")
     assert summary.source == "board+sfm" and summary.scale == "metric"
     assert summary.registered == 8

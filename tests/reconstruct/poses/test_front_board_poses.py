@@ -24,8 +24,13 @@ from core.config import from_mapping
 from core.errors import RigError
 from reconstruct.frames import decode
 from reconstruct.model.camera import Pose, write_colmap_text
+from reconstruct.poses import sfm as poses_sfm
 from reconstruct.poses import stage as poses
-from reconstruct.poses.stage import SfmResult
+from reconstruct.poses.board_sfm import sfm_neighbourhood
+from reconstruct.poses.config import PosesConfig
+from reconstruct.poses.output import PoseSummary
+from reconstruct.poses.output import load as load_poses
+from reconstruct.poses.sfm import SfmResult
 
 TRUTH = true_poses()
 
@@ -47,9 +52,9 @@ def rotation_deg(a: Pose, b: Pose) -> float:
     return float(np.degrees(np.arccos(np.clip((np.trace(a.R @ b.R.T) - 1) / 2, -1.0, 1.0))))
 
 
-def _poses(root: Path, conf: dict[str, Any] | None = None) -> tuple[dict, poses.PoseSummary]:
+def _poses(root: Path, conf: dict[str, Any] | None = None) -> tuple[dict, PoseSummary]:
     out = poses.run(conf or {}, root, root / "recon" / "decoded", root / "recon" / "poses")
-    intr, pose_map, summary = poses.load(out)
+    intr, pose_map, summary = load_poses(out)
     return {v: (intr[v], pose_map[v]) for v in pose_map}, summary
 
 
@@ -88,7 +93,7 @@ def test_sfm_adds_the_view_the_board_misses(
         seen.append(args[-1])  # the board's intrinsics are passed on, fixed
         return fake_sfm(TRUTH, points)
 
-    monkeypatch.setattr(poses, "run_sfm", sfm)
+    monkeypatch.setattr(poses_sfm, "run_sfm", sfm)
     cameras, summary = _poses(session_copy)
     assert summary.source == "board+sfm" and summary.registered == len(TRUTH)
     assert seen == [INTRINSICS]
@@ -114,20 +119,20 @@ def test_sfm_runs_beside_the_board_only_where_it_can_add_a_view(
         calls.append(1)
         return fake_sfm(TRUTH[:HIDDEN], np.zeros((5, 3)))
 
-    monkeypatch.setattr(poses, "run_sfm", sfm)
+    monkeypatch.setattr(poses_sfm, "run_sfm", sfm)
     cameras, summary = _poses(root)  # auto
     assert calls == [] and summary.source == "board" and summary.registered == HIDDEN
     shutil.rmtree(root / "recon" / "poses")
     _, summary = _poses(root, {"board_with_sfm": True})  # the cross-check, asked for
     assert calls == [1] and summary.source == "board+sfm"
     with pytest.raises(RigError, match="board_with_sfm"):
-        from_mapping(poses.PosesConfig, {"board_with_sfm": "sometimes"}, "config", "poses")
+        from_mapping(PosesConfig, {"board_with_sfm": "sometimes"}, "config", "poses")
 
 
 def test_sfm_neighbourhood_of_the_unposed_views_in_capture_order() -> None:
     views = list(range(40))
-    assert poses.sfm_neighbourhood(views, [0, 39], 4) == [*range(5), *range(35, 40)]
-    assert poses.sfm_neighbourhood(views, [20], 2) == [18, 19, 20, 21, 22]
+    assert sfm_neighbourhood(views, [0, 39], 4) == [*range(5), *range(35, 40)]
+    assert sfm_neighbourhood(views, [20], 2) == [18, 19, 20, 21, 22]
 
 
 def test_sfm_beside_the_board_runs_on_the_hidden_views_neighbours(
@@ -147,7 +152,7 @@ def test_sfm_beside_the_board_runs_on_the_hidden_views_neighbours(
             cameras.pop("view_0014.png")
         return SfmResult(cameras, full.points, full.mean_reprojection_error_px)
 
-    monkeypatch.setattr(poses, "run_sfm", sfm)
+    monkeypatch.setattr(poses_sfm, "run_sfm", sfm)
     # the neighbourhood's model misses the hidden view: SfM of every view follows
     cameras, summary = _poses(root)
     assert [len(a) for a in asked] == [9, 15] and summary.views["14"]["source"] == "sfm"
@@ -168,7 +173,7 @@ def test_failing_sfm_is_tolerated(session_copy: Path, monkeypatch: pytest.Monkey
     def sfm(*_: Any) -> SfmResult:
         raise RigError("structure from motion registered no views", "texture")
 
-    monkeypatch.setattr(poses, "run_sfm", sfm)
+    monkeypatch.setattr(poses_sfm, "run_sfm", sfm)
     cameras, summary = _poses(session_copy)
     assert summary.source == "board" and summary.registered == len(TRUTH) - 1
     assert "registered no views" in summary.extra["sfm_error"]
@@ -191,7 +196,7 @@ def test_source_choice_and_errors(
     session_copy: Path, make_session: Callable[..., Path], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     with pytest.raises(RigError, match="poses.source"):
-        from_mapping(poses.PosesConfig, {"source": "lidar"}, "config", "poses")
+        from_mapping(PosesConfig, {"source": "lidar"}, "config", "poses")
     with pytest.raises(RigError, match="poses.source is known"):
         _poses(session_copy, {"source": "known"})
     plain = make_session(views=4, illuminations=("white",), known_poses=False)
@@ -205,13 +210,13 @@ def test_source_choice_and_errors(
         calls.append(str(image_dir))
         return SfmResult({}, np.zeros((0, 3)), 0.0)
 
-    monkeypatch.setattr(poses, "run_sfm", sfm)
+    monkeypatch.setattr(poses_sfm, "run_sfm", sfm)
     with pytest.raises(RigError, match=r"only 0 of 4 views .*\(sfm\)"):
         _poses(plain)
     assert len(calls) == 1
     # a board that poses too few views and no SfM: a clear error naming both
     monkeypatch.setattr(
-        poses, "run_sfm", lambda *_: (_ for _ in ()).throw(RigError("SfM found nothing", "x"))
+        poses_sfm, "run_sfm", lambda *_: (_ for _ in ()).throw(RigError("SfM found nothing", "x"))
     )
     with pytest.raises(RigError, match="board posed only .* SfM failed: SfM found nothing"):
         _poses(session_copy, {"board_min_corners": 500})
@@ -237,9 +242,9 @@ def test_board_frame_poses_send_the_board_to_the_mesh_stage(session_copy: Path) 
     from reconstruct.initial_mesh.stage import MeshConfig
     from reconstruct.run.front import _mesh_config
 
-    _poses(session_copy, {"board_with_sfm": False})
+    _, summary = _poses(session_copy, {"board_with_sfm": False})
     session = Session.open(session_copy)
-    conf = _mesh_config(MeshConfig(), session, session_copy / "recon" / "poses")
+    conf = _mesh_config(MeshConfig(), session, summary)
     assert conf.board_spec() == SPEC
     # known poses win in auto; they are in the board frame when its corners agree with them
     for shift, in_frame in ((0.0, True), (0.05, False)):
@@ -249,6 +254,6 @@ def test_board_frame_poses_send_the_board_to_the_mesh_stage(session_copy: Path) 
         )
         _, summary = _poses(session_copy)
         assert summary.source == "known" and summary.extra["board_frame"] is in_frame
-        conf = _mesh_config(MeshConfig(), session, session_copy / "recon" / "poses")
+        conf = _mesh_config(MeshConfig(), session, summary)
         assert (conf.board_spec() == SPEC) is in_frame
     assert summary.views["0"]["reprojection_px"] > 10  # the shifted poses miss the corners

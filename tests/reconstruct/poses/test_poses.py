@@ -13,17 +13,14 @@ import pytest
 
 from core.errors import RigError
 from core.session import Session
+from core.session_info import SessionInfo
 from reconstruct.frames import decode
 from reconstruct.model.camera import Intrinsics, Pose, read_colmap_text, write_colmap_text
+from reconstruct.poses import output as poses_output
 from reconstruct.poses import stage as poses
-from reconstruct.poses.stage import (
-    PosesConfig,
-    metric_scale,
-    rescale,
-    run_sfm,
-    session_intrinsics,
-    view_of_name,
-)
+from reconstruct.poses.config import PosesConfig
+from reconstruct.poses.known import view_of_name
+from reconstruct.poses.sfm import metric_scale, rescale, run_sfm, session_intrinsics
 
 
 def _run(root: Path) -> Path:
@@ -34,7 +31,7 @@ def _run(root: Path) -> Path:
 def test_known_poses(make_session: Callable[..., Path]) -> None:
     root = make_session(views=4, illuminations=("white",))
     out = _run(root)
-    intr, pose_map, summary = poses.load(out)
+    intr, pose_map, summary = poses_output.load(out)
     assert summary.source == "known" and summary.scale == "metric"
     assert summary.registered == summary.total == 4
     _, truth = read_colmap_text(root / "poses")
@@ -64,22 +61,22 @@ def test_view_names(make_session: Callable[..., Path]) -> None:
 
 def test_metric_scale_from_known_distances() -> None:
     centres = {0: np.zeros(3), 1: np.array([2.0, 0.0, 0.0]), 2: np.array([0.0, 4.0, 0.0])}
-    info = {"profile": {"known_distances": [{"views": [0, 1], "metres": 0.5},
-                                            {"views": [0, 2], "metres": 1.0}]}}
+    info = SessionInfo.from_mapping({"profile": {"known_distances": [
+        {"views": [0, 1], "metres": 0.5}, {"views": [0, 2], "metres": 1.0}]}})
     assert metric_scale(info, centres) == pytest.approx(0.25)
-    assert metric_scale({}, centres) is None
-    with pytest.raises(RigError, match="known_distances"):
-        metric_scale({"known_distances": [{"views": [0]}]}, centres)
+    assert metric_scale(SessionInfo(), centres) is None
+    with pytest.raises(RigError, match=r"session.yaml: `known_distances\[0\]`"):
+        SessionInfo.from_mapping({"known_distances": [{"views": [0]}]})
 
 
 def test_intrinsics_from_session_and_rescale() -> None:
-    intr = session_intrinsics({"camera": {"intrinsics": {
-        "model": "PINHOLE", "width": 200, "height": 100, "params": [150, 150, 100, 50]}}})
+    intr = session_intrinsics(SessionInfo.from_mapping({"camera": {"intrinsics": {
+        "model": "PINHOLE", "width": 200, "height": 100, "params": [150, 150, 100, 50]}}}))
     assert intr == Intrinsics("PINHOLE", 200, 100, (150.0, 150.0, 100.0, 50.0))
     half = rescale(intr, 100, 50)
     assert half.params == (75.0, 75.0, 50.0, 25.0)
-    with pytest.raises(RigError, match="intrinsics"):
-        session_intrinsics({"intrinsics": {"model": "PINHOLE"}})
+    with pytest.raises(RigError, match="session.yaml: `intrinsics`"):
+        SessionInfo.from_mapping({"intrinsics": {"model": "PINHOLE"}})
 
 
 @pytest.mark.slow

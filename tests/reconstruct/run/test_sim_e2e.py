@@ -13,7 +13,8 @@ import pytest
 import trimesh
 import yaml
 
-from core.session import FrameRecord, append_manifest, sha256_file
+from core.files import sha256_file
+from core.manifest import FrameRecord, append_manifest
 from drivers.sim.rig import SimRig
 from reconstruct.initial_mesh.dense.poisson import read_mesh
 from reconstruct.model.camera import read_colmap_text

@@ -25,8 +25,8 @@ def test_sim_capture_on_a_board_sees_it_in_every_view(tmp_path: Path) -> None:
     assert isinstance(profile.board, BoardSpec) and profile.board.paper == "A3"
     out = run_capture(profile, tmp_path / "s", yes=True, console=Console(file=None, quiet=True))
     session = Session.open(out)
-    assert BoardSpec.from_dict(session.info["board"]) == profile.board
-    checks = session.info["board_checks"]
+    assert BoardSpec.from_dict(dict(session.info.board or {})) == profile.board
+    checks = session.info.board_checks
     assert sorted(checks) == [0, 1, 2]
     for view, check in checks.items():
         assert check["corners"] >= 6 and check["contrast"] > 0.2, (view, check)
@@ -35,7 +35,7 @@ def test_sim_capture_on_a_board_sees_it_in_every_view(tmp_path: Path) -> None:
         look = board_image(read_raw(out / frame.path), check["binning"])
         assert detect_board(look, profile.board).n_corners == check["corners"]
     for label in ("LED2", "LED3"):
-        assert session.info["exposure_checks"][label]["board_contrast"] > 0.2
+        assert session.info.exposure_checks[label]["board_contrast"] > 0.2
 
 
 def test_dim_board_gets_an_exposure_hint(tmp_path: Path) -> None:
@@ -44,7 +44,7 @@ def test_dim_board_gets_an_exposure_hint(tmp_path: Path) -> None:
     data["camera_settings"]["exposure_s"] /= 8  # three stops under
     console = Console(record=True, width=250)
     out = run_capture(parse_profile(data, "dim.yaml"), tmp_path / "s", yes=True, console=console)
-    checks = Session.open(out).info["exposure_checks"]
+    checks = Session.open(out).info.exposure_checks
     assert all(c["board_contrast"] < 0.2 for c in checks.values())
     text = console.export_text()
     assert "lengthen the exposure" in text
@@ -64,7 +64,7 @@ def test_capture_warns_when_the_board_is_not_in_view(tmp_path: Path) -> None:
     text = console.export_text()
     assert "view 1: only 0 board corners found" in text and "view 4:" in text
     session = Session.open(out)
-    checks = session.info["board_checks"]
+    checks = session.info.board_checks
     assert all(c["corners"] == 0 and c["contrast"] == 0.0 for c in checks.values())
     lit = {f.frame for f in session.frames if f.illumination == "A"}  # not the ambient frames
     assert {c["frame"] for c in checks.values()} == lit

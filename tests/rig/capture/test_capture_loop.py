@@ -12,7 +12,8 @@ from fakes import PROFILE, fake_profile, fake_rig
 from rich.console import Console
 
 from core.errors import RigError
-from core.session import MANIFEST_FILE, Session, read_manifest, verify_frames
+from core.manifest import MANIFEST_FILE, read_manifest, verify_frames
+from core.session import Session
 from rig.capture import CaptureStopped, run_capture
 from rig.profile import parse_profile
 
@@ -41,10 +42,10 @@ def test_full_capture_writes_a_valid_session(tmp_path: Path) -> None:
     assert_complete(out, 4 * 4)
     assert session.views() == [0, 1, 2, 3]
     assert [f.illumination for f in session.frames_of_view(2)] == ["ambient", "A", "B", "C"]
-    assert session.info["plan"]["frames"] == 16
-    assert session.info["devices"]["camera"]["serial"] == "C1"
-    assert session.info["runs"][0]["status"] == "complete"
-    assert "numpy" in session.info["software"]
+    assert session.info.plan.frames == 16
+    assert session.info.devices["camera"]["serial"] == "C1"
+    assert session.info.runs[0]["status"] == "complete"
+    assert "numpy" in session.info.software
     # the light is switched once per frame (ambient = off) and off at the end
     light = rig.made["light"]
     assert light.log[:4] == [None, {"r": 1.0}, {"g": 1.0}, {"b": 0.5, "w": 0.5}]
@@ -58,10 +59,10 @@ def test_camera_failure_leaves_a_resumable_session(tmp_path: Path) -> None:
     assert "camera" in str(failure.value) and "--resume" in str(failure.value)
     assert len(read_manifest(out)) == 6
     info = Session.open(out).info
-    assert info["runs"][0]["status"].startswith("failed")
+    assert info.runs[0]["status"].startswith("failed")
     capture(out, resume=True)
     assert_complete(out, 16)
-    assert [r["status"] for r in Session.open(out).info["runs"]][-1] == "complete"
+    assert [r["status"] for r in Session.open(out).info.runs][-1] == "complete"
 
 
 def test_resume_repairs_a_torn_manifest_and_re_adopts_its_frame(tmp_path: Path) -> None:
@@ -93,7 +94,7 @@ def test_ctrl_c_finishes_the_frame_in_flight_and_resumes(tmp_path: Path) -> None
         capture(out, on_frame=press_ctrl_c)
     assert "resume with `rig capture --resume" in str(stopped.value)
     assert sorted(r.frame for r in read_manifest(out)) == list(range(6))
-    assert Session.open(out).info["runs"][0]["status"] == "stopped"
+    assert Session.open(out).info.runs[0]["status"] == "stopped"
     assert signal.getsignal(signal.SIGINT) is handler_before  # the capture restored it
     capture(out, resume=True)
     assert_complete(out, 16)
@@ -115,7 +116,7 @@ def test_resume_uses_the_snapshot_profile(tmp_path: Path) -> None:
 
 def test_exposure_checks_are_recorded_once_per_illumination(tmp_path: Path) -> None:
     out = capture(tmp_path / "s", open_rig=fake_rig(level=70000))  # clipped: saturates
-    checks = Session.open(out).info["exposure_checks"]
+    checks = Session.open(out).info.exposure_checks
     assert set(checks) == {"A", "B", "C"}
     assert "halve" in checks["A"]["suggestion"] or "quarter" in checks["A"]["suggestion"]
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from core.session import read_manifest, verify_frames
+from core.manifest import read_manifest, verify_frames
 
 SCRIPT = Path(__file__).parents[1] / "fakes.py"
 FRAMES = 6 * 4

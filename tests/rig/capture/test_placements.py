@@ -97,7 +97,7 @@ def test_person_is_asked_to_move_projector_then_camera(tmp_path: Path) -> None:
     assert {(f.view, f.extra["projector_placement"]) for f in session.frames} == {
         (v, v // 3) for v in range(6)
     }
-    assert session.info["plan"]["projector_placements"] == {
+    assert session.info.plan.projector_placements == {
         "placements": 2,
         "views_per_placement": 3,
     }

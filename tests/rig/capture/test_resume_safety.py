@@ -13,7 +13,8 @@ from rich.console import Console
 from simrig import PROFILE as SIM_PROFILE
 
 from core.errors import RigError
-from core.session import MANIFEST_FILE, read_manifest, sha256_file, verify_frames
+from core.files import sha256_file
+from core.manifest import MANIFEST_FILE, read_manifest, verify_frames
 from rig.capture import run_capture
 from rig.capture.resume import QUARANTINE_DIR, REASONS_FILE, quarantine
 from rig.cli import main

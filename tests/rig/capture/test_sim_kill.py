@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from simrig import FRAMES, PROFILE, assert_complete, manifest_lines, rig_capture
 
-from core.session import Session, read_manifest, verify_frames
+from core.manifest import read_manifest, verify_frames
+from core.session import Session
 from rig.cli import main
 
 pytest.importorskip("drivers.sim")
@@ -46,7 +47,7 @@ def test_sigkill_at_random_instants_then_resume(tmp_path: Path, seed: int) -> No
         proc = rig_capture("--resume", str(out))
     assert kills >= 1
     assert_complete(out)
-    runs = Session.open(out).info["runs"]
+    runs = Session.open(out).info.runs
     # a resume killed after re-adopting a frame but before recording its run leaves no run
     assert 2 <= len(runs) <= kills + 1 and runs[-1]["status"] == "complete"
 
@@ -65,6 +66,6 @@ def test_ctrl_c_exits_130_with_the_resume_command(tmp_path: Path) -> None:
     assert "".join(f"rig capture --resume {out}".split()) in text
     records = read_manifest(out)
     assert 3 <= len(records) < FRAMES and verify_frames(out, records) == []
-    assert Session.open(out).info["runs"][-1]["status"] == "stopped"
+    assert Session.open(out).info.runs[-1]["status"] == "stopped"
     assert main(["capture", "--resume", str(out), "--yes"]) == 0
     assert_complete(out)

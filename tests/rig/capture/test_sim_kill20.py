@@ -18,7 +18,7 @@ import pytest
 import yaml
 from simrig import PROFILE
 
-from core.session import read_manifest, verify_frames
+from core.manifest import read_manifest, verify_frames
 from rig.capture.resume import QUARANTINE_DIR, REASONS_FILE
 from rig.cli import main
 

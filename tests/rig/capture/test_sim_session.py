@@ -10,7 +10,8 @@ import pytest
 import yaml
 from simrig import PROFILE, assert_complete
 
-from core.session import Session, read_manifest
+from core.manifest import read_manifest
+from core.session import Session
 from rig.cli import main
 
 pytest.importorskip("drivers.sim")
@@ -27,8 +28,8 @@ def test_sim_capture_writes_a_valid_session(
     assert (out / "calibration" / "index.yaml").is_file()
     assert (out / "ground_truth" / "mesh.ply").is_file()
     assert not (out / "poses").exists()  # poses: estimate (the default)
-    assert session.info["devices"]["camera"]["driver"] == "sim"
-    assert session.info["calibration"]["camera"] == "Canon EOS 5D Mark II"
+    assert session.info.devices["camera"]["driver"] == "sim"
+    assert session.info.calibration.camera == "Canon EOS 5D Mark II"
     first = session.frames_of_view(1)[1]
     assert first.path.endswith(".dng") and first.exposure_s > 0
     import rawpy
@@ -135,9 +136,9 @@ def test_known_poses_are_written_for_the_sim(tmp_path: Path) -> None:
     cameras, images = read_colmap_text(out / "poses")
     assert len(images) == 2 and cameras[1].width == 64
     info = Session.open(out).info
-    assert info["notes"] == "test"
-    from reconstruct.poses.stage import metric_scale
+    assert info.notes == "test"
+    from reconstruct.poses.sfm import metric_scale
 
     centres = {v: np.zeros(3) + v for v in (0, 1)}  # reconstructed 1.732 apart
     assert metric_scale(info, centres) == pytest.approx(2.0 / np.sqrt(3))
-    assert info["known_lengths"] == {"light_offset_m": 0.1}
+    assert info.known_lengths == {"light_offset_m": 0.1}

@@ -1,0 +1,117 @@
+"""The session's ``manifest.jsonl``: one :class:`FrameRecord` per line, appended only after the
+frame's file is durable; read back with every line checked (:mod:`core.manifest_check`)."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from collections.abc import Iterable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from core.errors import RigError
+from core.files import sha256_file
+from core.manifest_check import check_line
+
+log = logging.getLogger(__name__)
+
+MANIFEST_FILE = "manifest.jsonl"
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    """One manifest line: a frame whose file is safely on disk."""
+
+    frame: int
+    view: int
+    illumination: str  # illumination name, "ambient", or a structured-light pattern id
+    path: str  # relative to the session directory, POSIX separators
+    sha256: str
+    exposure_s: float
+    iso: float
+    timestamp: str
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), sort_keys=True)
+
+    @classmethod
+    def from_dict(
+        cls, data: dict[str, Any], where: str, n_views: int | None = None
+    ) -> FrameRecord:
+        if not isinstance(data, dict):
+            check_line(data, where)
+        missing = [k for k in cls.__dataclass_fields__ if k not in data and k != "extra"]
+        if missing:
+            raise RigError(f"{where} lacks {', '.join(missing)}", "the manifest line is malformed")
+        check_line(data, where, n_views)
+        known = {k: data[k] for k in cls.__dataclass_fields__ if k in data}
+        extra = {k: v for k, v in data.items() if k not in cls.__dataclass_fields__}
+        known.setdefault("extra", {})
+        known["extra"] = {**known["extra"], **extra}
+        return cls(**known)
+
+
+def append_manifest(session_dir: Path, record: FrameRecord) -> None:
+    """Append one line and fsync it; called only after the frame's file is durable."""
+    path = session_dir / MANIFEST_FILE
+    with open(path, "a", encoding="utf-8") as handle:
+        handle.write(record.to_json() + "\n")
+        handle.flush()
+        os.fsync(handle.fileno())
+
+
+def read_manifest(session_dir: Path, n_views: int | None = None) -> list[FrameRecord]:
+    """All complete manifest lines, each checked (``n_views``: the plan's, bounds ``view``).
+    A torn last line (a kill mid-append) is ignored with a warning — its frame is simply
+    captured again on resume."""
+    path = session_dir / MANIFEST_FILE
+    if not path.is_file():
+        return []
+    records: list[FrameRecord] = []
+    lines = path.read_bytes().split(b"\n")
+    for number, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            data = json.loads(line.decode("utf-8"))
+        except UnicodeDecodeError as exc:
+            if number == len(lines):  # last line, not newline-terminated: torn write
+                log.warning("%s: ignoring the torn last line %d", path, number)
+                continue
+            raise RigError(
+                f"{path} line {number} is not text (byte {exc.start}: binary data)",
+                "restore the manifest from a backup or remove that line and run "
+                "`rig session verify`",
+            ) from exc
+        except json.JSONDecodeError as exc:
+            if number == len(lines):  # last line, not newline-terminated: torn write
+                log.warning("%s: ignoring the torn last line %d", path, number)
+                continue
+            raise RigError(
+                f"{path} line {number} is not valid JSON ({exc.msg})",
+                "restore the manifest from a backup or remove that line and run "
+                "`rig session verify`",
+            ) from exc
+        records.append(FrameRecord.from_dict(data, f"{path} line {number}", n_views))
+    return records
+
+
+@dataclass(frozen=True)
+class FrameProblem:
+    record: FrameRecord
+    problem: str  # "missing" or "hash mismatch"
+
+
+def verify_frames(session_dir: Path, records: Iterable[FrameRecord]) -> list[FrameProblem]:
+    """Re-hash every frame; report missing files and mismatching hashes."""
+    problems = []
+    for record in records:
+        file = session_dir / record.path
+        if not file.is_file():
+            problems.append(FrameProblem(record, "missing"))
+        elif sha256_file(file) != record.sha256:
+            problems.append(FrameProblem(record, "hash mismatch"))
+    return problems
