@@ -30,7 +30,8 @@ from scipy.stats import norm, spearmanr
 
 from reconstruct.frames.ambient import subtract_ambient
 from reconstruct.optimise.problem import Frames
-from reconstruct.optimise.steps import OptimiseResult, OptimiseSettings, optimise
+from reconstruct.optimise.settings import OptimiseSettings
+from reconstruct.optimise.steps import OptimiseResult, optimise
 from reconstruct.optimise.synthetic import SyntheticScene, make_scene, perturb
 
 

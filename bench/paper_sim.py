@@ -327,7 +327,7 @@ def do_oracle(
     from reconstruct.model.raycast import RayCaster
     from reconstruct.optimise.mesh import vertex_normals
     from reconstruct.optimise.sampling import bilinear
-    from reconstruct.optimise.steps import OptimiseSettings
+    from reconstruct.optimise.settings import OptimiseSettings
     from reconstruct.outputs.evaluate import load_mesh
 
     t0 = time.perf_counter()

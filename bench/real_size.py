@@ -165,7 +165,7 @@ def tables(runs: list[dict[str, Any]], size: Size) -> list[ResultTable]:
     for r in runs:
         rep, sc = r["report"], r["score"]
         # The child's ru_maxrss (KiB, stored as MiB) misses peaks that `rig reconstruct`'s
-        # per-stage resets of VmHWM cleared (reconstruct/run/memory.py); the stages' own peaks
+        # per-stage resets of VmHWM cleared (reconstruct/stages/memory.py); the stages' own peaks
         # (MB of 10⁶ bytes) keep them: the larger of the two.
         stage_peaks = [e.get("peak_rss_mb") or 0.0 for e in r["stages"].values()]
         peak_gb = max(r["peak_rss_mb"] * 2**20 / 1e9, max(stage_peaks, default=0.0) / 1e3)
@@ -185,7 +185,7 @@ def tables(runs: list[dict[str, Any]], size: Size) -> list[ResultTable]:
         )
         cells = [
             f"{name} {entry['seconds']:.0f}"
-            # recon/timings.json: MB of 10⁶ bytes (reconstruct.run.memory)
+            # recon/timings.json: MB of 10⁶ bytes (reconstruct.stages.memory)
             + (f" ({entry['peak_rss_mb'] / 1e3:.2f})" if entry.get("peak_rss_mb") else "")
             for name, entry in r["stages"].items()
             if not entry.get("skipped")

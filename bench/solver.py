@@ -56,7 +56,8 @@ def worker_optimise(
     scene_path: Path, seed: int, profile_to: Path | None, settings: dict[str, Any]
 ) -> dict[str, Any]:
     """The full paper steps from the perturbed shape and a zero light offset."""
-    from reconstruct.optimise.steps import OptimiseSettings, optimise
+    from reconstruct.optimise.settings import OptimiseSettings
+    from reconstruct.optimise.steps import optimise
 
     t0 = time.perf_counter()
     scene, inp = _start(scene_path, seed)
@@ -117,7 +118,7 @@ def _joint_problem(scene_path: Path, seed: int) -> tuple[Any, np.ndarray, np.nda
     """The first joint stage's problem from the perturbed shape and a wrong light."""
     from reconstruct.optimise.cost import JointCost
     from reconstruct.optimise.problem_setup import build_problem, initial_reflectance
-    from reconstruct.optimise.steps import OptimiseSettings
+    from reconstruct.optimise.settings import OptimiseSettings
 
     scene, inp = _start(scene_path, seed)
     cfg = OptimiseSettings()

@@ -21,8 +21,6 @@ def chart_reference(
     rig: SimRig, distance_m: float | None, region: tuple[int, int, int, int] | None
 ) -> WhiteReference:
     """A chart rig with ``rig``'s reference camera and seed, ``distance_m`` from the patch."""
-    from drivers.sim.rig import SimRig
-
     names, patches = defaults.colorchecker_reflectances(DEFAULT_GRID)
     white = next(i for i, n in enumerate(names) if n.lower().startswith("white"))
     chart = make_scene("chart")
@@ -39,7 +37,7 @@ def chart_reference(
             "target_m": [float(c) for c in centre],
         },
     }
-    chart_rig = SimRig(config, rig.seed)
+    chart_rig = type(rig)(config, rig.seed)  # a rig like this one, looking at the chart
     if region is None:  # the patch's centre as the camera sees it
         side = max(2, int(0.6 * chart_rig.intrinsics.K[0, 0] * PATCH_SIDE_M / distance) // 2 * 2)
         cx, cy = chart_rig.intrinsics.width // 2, chart_rig.intrinsics.height // 2

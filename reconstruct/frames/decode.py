@@ -34,7 +34,7 @@ from core.files import write_bytes_atomically
 from core.manifest import MANIFEST_FILE, FrameRecord, verify_frames
 from core.session import Session
 from reconstruct.frames.raw import read_linear_rgb
-from reconstruct.run.stages import run_stage
+from reconstruct.stages.resumable import run_stage
 
 log = logging.getLogger("reconstruct.frames.decode")
 

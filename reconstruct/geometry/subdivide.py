@@ -37,7 +37,7 @@ from reconstruct.geometry.visibility import Visibility, VisibilityConfig, comput
 from reconstruct.initial_mesh.dense.poisson import largest_component, read_mesh
 from reconstruct.poses.output import PoseSet
 from reconstruct.poses.output import load as load_poses
-from reconstruct.run.stages import run_stage
+from reconstruct.stages.resumable import run_stage
 
 log = logging.getLogger("reconstruct.geometry.subdivide")
 

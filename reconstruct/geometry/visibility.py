@@ -26,8 +26,8 @@ from reconstruct.model.camera import Intrinsics, Pose, project
 from reconstruct.model.raycast import RayCaster
 from reconstruct.poses.output import PoseSet
 from reconstruct.poses.output import load as load_poses
-from reconstruct.run.progress import track
-from reconstruct.run.stages import run_stage
+from reconstruct.stages.progress import track
+from reconstruct.stages.resumable import run_stage
 
 log = logging.getLogger("reconstruct.geometry.visibility")
 

@@ -65,7 +65,7 @@ from reconstruct.initial_mesh.triangulation import (
 )
 from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.poses.sfm import rescale
-from reconstruct.run.stages import run_stage
+from reconstruct.stages.resumable import run_stage
 
 log = logging.getLogger("reconstruct.initial_mesh.procam")
 

@@ -51,7 +51,7 @@ from reconstruct.model.raycast import RayCaster
 from reconstruct.poses.board import BoardSpec
 from reconstruct.poses.output import POINTS, PoseSet
 from reconstruct.poses.output import load as load_poses
-from reconstruct.run.stages import run_stage
+from reconstruct.stages.resumable import run_stage
 
 log = logging.getLogger("reconstruct.initial_mesh.stage")
 # fewer fused stereo points than this cannot support a Poisson surface (pycolmap's trimmer

@@ -5,13 +5,9 @@ from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.linearisation import Linearisation
 from reconstruct.optimise.problem import Frames, Observations, Problem, Rig, Weights
 from reconstruct.optimise.problem_setup import build_problem
+from reconstruct.optimise.settings import OptimiseInput, OptimiseSettings
 from reconstruct.optimise.solver import SolverSettings, levenberg_marquardt
-from reconstruct.optimise.steps import (
-    OptimiseInput,
-    OptimiseResult,
-    OptimiseSettings,
-    optimise,
-)
+from reconstruct.optimise.steps import OptimiseResult, optimise
 
 __all__ = [
     "Frames",

@@ -18,14 +18,12 @@ import os
 import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from core.files import fsync_dir
-
-if TYPE_CHECKING:
-    from reconstruct.optimise.steps import OptimiseInput, OptimiseSettings
+from reconstruct.optimise.settings import OptimiseInput, OptimiseSettings
 
 log = logging.getLogger(__name__)
 

@@ -4,8 +4,6 @@ the reflectance a solve starts from."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from calibration.basis import SpectralBasis
@@ -17,10 +15,8 @@ from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
 from reconstruct.optimise.problem import LightMode, Observations, Problem, Rig, Weights
 from reconstruct.optimise.sampling import sample_pairs, taps_valid
+from reconstruct.optimise.settings import OptimiseInput, OptimiseSettings, SettingsLightMode
 from reconstruct.optimise.weights import edge_scale, photometric_weights
-
-if TYPE_CHECKING:
-    from reconstruct.optimise.steps import OptimiseInput, OptimiseSettings, SettingsLightMode
 
 
 def problem_mode(mode: SettingsLightMode) -> LightMode:

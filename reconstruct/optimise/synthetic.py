@@ -29,7 +29,7 @@ from reconstruct.model.raycast import RayCaster
 from reconstruct.model.render import render_image, shade, trace_view
 from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.problem import Frames, Rig
-from reconstruct.optimise.steps import OptimiseInput
+from reconstruct.optimise.settings import OptimiseInput
 
 
 @dataclass

@@ -21,7 +21,7 @@ from reconstruct.model.raycast import RayCaster
 from reconstruct.model.render import render_image
 from reconstruct.outputs import export, plots
 from reconstruct.outputs.relight import encode_srgb
-from reconstruct.run import publish
+from reconstruct.stages import publish
 
 EVALUATION_FILE, RMSE_FILE, ERROR_MAP, ERROR_HIST = publish.EVALUATION
 

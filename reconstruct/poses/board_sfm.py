@@ -30,7 +30,7 @@ from reconstruct.poses.board.poses import rms_of
 from reconstruct.poses.config import MIN_VIEWS, PosesConfig
 from reconstruct.poses.output import PoseSummary
 from reconstruct.poses.sfm import full_size, rescale, session_intrinsics, sfm_poses
-from reconstruct.run.progress import track
+from reconstruct.stages.progress import track
 
 log = logging.getLogger("reconstruct.poses.board_sfm")
 

@@ -20,7 +20,7 @@ from reconstruct.frames.decode import SFM_DIR, DecodeIndex
 from reconstruct.model.camera import CAMERA_MODELS, Intrinsics, Pose
 from reconstruct.poses.config import MIN_VIEWS, PosesConfig
 from reconstruct.poses.output import PoseSummary
-from reconstruct.run.stages import quiet_colmap
+from reconstruct.stages.resumable import quiet_colmap
 
 log = logging.getLogger("reconstruct.poses.sfm")
 

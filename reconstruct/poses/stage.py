@@ -33,11 +33,11 @@ import shutil
 from collections.abc import Mapping
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
-from core.config import bounded, from_mapping
+from core.config import from_mapping
 from core.errors import RigError
 from core.session import SESSION_FILE, Session
 from reconstruct.frames.decode import INDEX, DecodeIndex
@@ -51,7 +51,7 @@ from reconstruct.poses.board_sfm import (
 from reconstruct.poses.config import MIN_VIEWS, PosesConfig
 from reconstruct.poses.known import known_poses
 from reconstruct.poses.sfm import sfm_poses
-from reconstruct.run.stages import run_stage
+from reconstruct.stages.resumable import run_stage
 
 log = logging.getLogger("reconstruct.poses.stage")
 

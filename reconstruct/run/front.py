@@ -45,7 +45,7 @@ from reconstruct.poses.board_sfm import session_board
 from reconstruct.poses.config import PosesConfig
 from reconstruct.poses.output import PoseSummary
 from reconstruct.poses.output import load as load_poses
-from reconstruct.run.stages import attach_log_file
+from reconstruct.stages.resumable import attach_log_file
 
 log = logging.getLogger("reconstruct")
 

@@ -24,7 +24,7 @@ from rich.console import Console
 from core.session import RECON_DIR, Session
 from reconstruct.run.pipeline import Reconstruction, run_reconstruction
 from reconstruct.run.progress import IterationProgress
-from reconstruct.run.stages import LOG_FILE, attach_log_file
+from reconstruct.stages.resumable import LOG_FILE, attach_log_file
 
 log = logging.getLogger("reconstruct")
 

@@ -9,8 +9,8 @@ fixed (``fixed``) as the paper does.
 
 A run is tracked in ``recon/status.json`` (:mod:`reconstruct.run.status`), the optimisation
 resumes from ``recon/optimise/checkpoint.npz`` (:mod:`reconstruct.optimise.checkpoint`) and the
-outputs are swapped in as one set (:mod:`reconstruct.run.publish`), so a kill at any instant loses
-at most the stage in progress and never leaves old and new outputs mixed.
+outputs are swapped in as one set (:mod:`reconstruct.stages.publish`), so a kill at any instant
+loses at most the stage in progress and never leaves old and new outputs mixed.
 """
 
 from __future__ import annotations
@@ -40,15 +40,16 @@ from reconstruct.optimise.checkpoint import FILE as CHECKPOINT_FILE
 from reconstruct.optimise.checkpoint import Checkpoint, input_key
 from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.problem import Frames, Rig
+from reconstruct.optimise.settings import OptimiseInput, OptimiseSettings
 from reconstruct.optimise.solver import IterationRecord
-from reconstruct.optimise.steps import OptimiseInput, OptimiseResult, OptimiseSettings, optimise
+from reconstruct.optimise.steps import OptimiseResult, optimise
 from reconstruct.outputs import export, plots
 from reconstruct.outputs.relight import Camera, encode_srgb, relight
 from reconstruct.run.front import FrontConfig, FrontResult, run_front
-from reconstruct.run.memory import peak_rss_mb, reset_peak_rss
-from reconstruct.run.publish import publish, staging_dir
-from reconstruct.run.stages import Timings, timed_run
 from reconstruct.run.status import RunStatus, tracked
+from reconstruct.stages.memory import peak_rss_mb, reset_peak_rss
+from reconstruct.stages.publish import publish, staging_dir
+from reconstruct.stages.resumable import Timings, timed_run
 
 log = logging.getLogger("reconstruct")
 FRONT_SECTIONS = ("decode", "poses", "mesh", "procam", "visibility", "subdivide")

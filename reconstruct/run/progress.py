@@ -6,22 +6,18 @@ on the terminal with ``-v``, instead of one printed line per iteration at every 
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping
 from types import TracebackType
 from typing import Any, TypeVar
 
 from rich.console import Console
 from rich.progress import (
-    BarColumn,
-    MofNCompleteColumn,
-    Progress,
     TaskID,
-    TextColumn,
-    TimeElapsedColumn,
 )
 
+from reconstruct.optimise.settings import OptimiseSettings
 from reconstruct.optimise.solver import IterationRecord
-from reconstruct.optimise.steps import OptimiseSettings
+from reconstruct.stages.progress import new_progress
 
 log = logging.getLogger("reconstruct.optimise")
 T = TypeVar("T")
@@ -42,34 +38,6 @@ def iteration_row(stage: str, rec: IterationRecord) -> str:
         f"{rec.step_norm:8.2e}  {rec.lam:7.1e}  {rec.cg_iterations:3d}  "
         f"{rec.seconds:5.2f}s{mark}"
     )
-
-
-def new_progress(console: Console | None = None, transient: bool = False) -> Progress:
-    """The project's bar layout: description, bar, done/total, elapsed time, a note."""
-    return Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TextColumn("{task.fields[note]}"),
-        console=console,
-        transient=transient,
-    )
-
-
-def track(items: Sequence[T], description: str) -> Iterator[T]:
-    """Iterate with a transient bar on stderr: for loops over views that take seconds each
-    (plane-sweep stereo, visibility ray casting), gone from the terminal once done. Not on a
-    log file or pipe, where a transient bar would only leave a blank line."""
-    console = Console(stderr=True)
-    if not console.is_terminal:
-        yield from items
-        return
-    with new_progress(console, transient=True) as bar:
-        task = bar.add_task(description, total=len(items), note="")
-        for item in items:
-            yield item
-            bar.advance(task)
 
 
 class IterationProgress:

@@ -11,7 +11,7 @@ from typing import Any
 from distributed import as_completed
 from rich.console import Console
 
-from reconstruct.run.progress import new_progress
+from reconstruct.stages.progress import new_progress
 from rig.batch.cluster import open_client
 from rig.batch.task import Outcome, reconstruct_session
 

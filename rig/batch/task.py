@@ -18,7 +18,7 @@ from core.session import RECON_DIR
 from reconstruct.frames.decode import list_unusable
 from reconstruct.outputs import export
 from reconstruct.outputs.evaluate import EVALUATION_FILE
-from reconstruct.run import publish
+from reconstruct.stages import publish
 
 OUTPUTS = (export.MESH_FILE, export.REFLECTANCE_FILE, export.REPORT_FILE)
 

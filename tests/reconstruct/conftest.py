@@ -14,7 +14,7 @@ from front_synthetic import build_session
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.problem import Problem
 from reconstruct.optimise.problem_setup import build_problem
-from reconstruct.optimise.steps import OptimiseSettings
+from reconstruct.optimise.settings import OptimiseSettings
 from reconstruct.optimise.synthetic import SyntheticScene, make_scene
 
 

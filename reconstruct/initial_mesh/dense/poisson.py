@@ -17,7 +17,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from core.errors import RigError
-from reconstruct.run.stages import quiet_colmap
+from reconstruct.stages.resumable import quiet_colmap
 
 
 def read_mesh(path: Path, process: bool = False) -> trimesh.Trimesh:

@@ -21,7 +21,7 @@ from scipy.ndimage import map_coordinates
 from core.config import bounded
 from reconstruct.model.camera import Intrinsics, Pose, project
 from reconstruct.model.raycast import RayCaster
-from reconstruct.run.progress import track
+from reconstruct.stages.progress import track
 
 log = logging.getLogger("reconstruct.initial_mesh.dense")
 

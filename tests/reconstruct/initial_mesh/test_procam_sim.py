@@ -24,7 +24,7 @@ from reconstruct.initial_mesh.procam import (
     read_light_positions,
 )
 from reconstruct.model.camera import read_colmap_text
-from reconstruct.run.stages import STAMP
+from reconstruct.stages.resumable import STAMP
 from tests.reconstruct.initial_mesh import sim_session
 
 

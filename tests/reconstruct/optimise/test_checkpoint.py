@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from reconstruct.optimise.checkpoint import Checkpoint, input_key
-from reconstruct.optimise.steps import OptimiseSettings, optimise
+from reconstruct.optimise.settings import OptimiseSettings
+from reconstruct.optimise.steps import optimise
 from reconstruct.optimise.synthetic import SyntheticScene
 
 CFG = OptimiseSettings(outer_iterations=2, light_iterations=4, joint_iterations=3)

@@ -9,7 +9,8 @@ import trimesh
 from core.errors import RigError
 from reconstruct.optimise.problem import Frames
 from reconstruct.optimise.sampling import bilinear, blur_frames
-from reconstruct.optimise.steps import OptimiseSettings, coarse_blurs, optimise
+from reconstruct.optimise.settings import OptimiseSettings
+from reconstruct.optimise.steps import coarse_blurs, optimise
 from reconstruct.optimise.synthetic import make_scene, perturb
 from reconstruct.outputs.evaluate import surface_distance
 

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from core.errors import RigError
-from reconstruct.optimise.steps import OptimiseSettings, optimise
+from reconstruct.optimise.settings import OptimiseSettings
+from reconstruct.optimise.steps import optimise
 from reconstruct.optimise.synthetic import SyntheticScene
 from reconstruct.run.front import FrontResult
 from reconstruct.run.pipeline import FRONT_SECTIONS, projector_lights

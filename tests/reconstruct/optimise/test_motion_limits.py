@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from reconstruct.optimise.mesh import adjacency
-from reconstruct.optimise.steps import OptimiseInput, OptimiseSettings, optimise
+from reconstruct.optimise.settings import OptimiseInput, OptimiseSettings
+from reconstruct.optimise.steps import optimise
 from reconstruct.optimise.synthetic import SyntheticScene, perturb
 from reconstruct.optimise.weights import edge_scale
 

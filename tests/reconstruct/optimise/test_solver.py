@@ -9,8 +9,8 @@ from scipy.optimize import least_squares
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.linearisation import Linearisation
 from reconstruct.optimise.problem_setup import build_problem, initial_reflectance
+from reconstruct.optimise.settings import OptimiseSettings
 from reconstruct.optimise.solver import SolverSettings, levenberg_marquardt
-from reconstruct.optimise.steps import OptimiseSettings
 from reconstruct.optimise.synthetic import SyntheticScene, make_scene
 
 

@@ -6,7 +6,8 @@ import numpy as np
 import trimesh
 
 from reconstruct.optimise.mesh import adjacency, edges
-from reconstruct.optimise.steps import OptimiseSettings, optimise
+from reconstruct.optimise.settings import OptimiseSettings
+from reconstruct.optimise.steps import optimise
 from reconstruct.optimise.synthetic import SyntheticScene, perturb
 from reconstruct.optimise.weights import edge_scale, photometric_weights
 from reconstruct.outputs.evaluate import surface_distance

@@ -12,7 +12,8 @@ from calibration.basis import default_basis, pca_basis
 from calibration.defaults import training_reflectances
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.problem_setup import build_problem
-from reconstruct.optimise.steps import OptimiseSettings, optimise
+from reconstruct.optimise.settings import OptimiseSettings
+from reconstruct.optimise.steps import optimise
 from reconstruct.optimise.synthetic import SyntheticScene, make_scene
 from reconstruct.optimise.uncertainty import (
     ReflectancePrior,

@@ -12,7 +12,8 @@ import yaml
 
 from core.errors import RigError
 from reconstruct.optimise.mesh import vertex_normals
-from reconstruct.optimise.steps import OptimiseResult, OptimiseSettings
+from reconstruct.optimise.settings import OptimiseSettings
+from reconstruct.optimise.steps import OptimiseResult
 from reconstruct.optimise.synthetic import SyntheticScene
 from reconstruct.outputs import export
 from reconstruct.outputs.evaluate import evaluate, surface_distance

@@ -41,7 +41,7 @@ def test_one_reconstruction_opens_the_session_and_loads_poses_once(
 
     monkeypatch.setattr(Session, "open", classmethod(counted_open))
     monkeypatch.setattr(poses_output, "read_colmap_text", counted_read)
-    monkeypatch.setattr("reconstruct.run.stages.write_bytes_atomically", counted_write)
+    monkeypatch.setattr("reconstruct.stages.resumable.write_bytes_atomically", counted_write)
     writer = export.write_report
 
     def counted_report(path: Path, report: dict[str, Any]) -> Path:

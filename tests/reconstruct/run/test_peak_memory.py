@@ -11,7 +11,7 @@ import pytest
 from recon_tiny import make_session, reconstruct_args
 
 from reconstruct.outputs import export
-from reconstruct.run.memory import peak_rss_mb, reset_peak_rss
+from reconstruct.stages.memory import peak_rss_mb, reset_peak_rss
 from rig.cli import main
 
 

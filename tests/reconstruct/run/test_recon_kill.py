@@ -19,8 +19,8 @@ from recon_tiny import make_session, reconstruct_args, spawn
 
 from reconstruct.optimise.checkpoint import FILE as CHECKPOINT
 from reconstruct.outputs import export
-from reconstruct.run import publish
 from reconstruct.run.status import read_status
+from reconstruct.stages import publish
 from rig.cli import main
 
 pytest.importorskip("drivers.sim")

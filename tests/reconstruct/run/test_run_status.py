@@ -14,8 +14,8 @@ import yaml
 
 from core.errors import RigError
 from core.yamlio import load_yaml, read_yaml
-from reconstruct.run import publish
 from reconstruct.run.status import FILE, RunStatus, describe, read_status, tracked
+from reconstruct.stages import publish
 
 
 def status_of(recon: Path, pid: int) -> None:

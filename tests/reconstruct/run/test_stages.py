@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from reconstruct.run.stages import run_stage, stage_hash
+from reconstruct.stages.resumable import run_stage, stage_hash
 
 
 def test_skips_reruns_and_times(tmp_path: Path) -> None:

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from core.files import write_bytes_atomically
-from reconstruct.run.memory import peak_rss_mb, reset_peak_rss
+from reconstruct.stages.memory import peak_rss_mb, reset_peak_rss
 
 log = logging.getLogger("reconstruct")
 
@@ -77,7 +77,7 @@ def is_done(out_dir: Path, digest: str) -> bool:
 
 class Timings:
     """``recon/timings.json``: each stage's wall time and peak resident memory
-    (:mod:`reconstruct.run.memory`), earlier runs' entries kept for stages this run did not
+    (:mod:`reconstruct.stages.memory`), earlier runs' entries kept for stages this run did not
     reach."""
 
     def __init__(self, recon_dir: Path) -> None:

@@ -1,0 +1,107 @@
+"""The joint optimisation's settings (the ``optimise:`` section of a reconstruct config) and
+its input, the reconstruction's first half."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from calibration.basis import SpectralBasis
+from calibration.estimation import DEFAULT_SMOOTHNESS
+from core.config import bounded, from_mapping
+from reconstruct.optimise.cost import Robust
+from reconstruct.optimise.problem import Frames, Rig
+from reconstruct.optimise.solver import SolverSettings
+
+# "offset": one shared camera-plate offset (bulb); "free": one position per view (projector);
+# "fixed": one position per view held at the initial positions (the paper fixes the projector
+# poses; free lights drift because the light distance trades against the reflectance scale).
+SettingsLightMode = Literal["offset", "free", "fixed"]
+
+
+@dataclass
+class OptimiseSettings:
+    """Settings of the joint optimisation (the ``optimise:`` section of a reconstruct config)."""
+
+    # γ1 (spectral) is 3, not the paper's 0.01: with 2 illuminations × 3 channels < N_b basis
+    # weights the spectral term must carry the null space (the far red under white LEDs).
+    # γ2 (photometric) is 4, not 2: where a thin part's normals end off, only the vertex's
+    # neighbours can correct its mis-scaled reflectance (docs/architecture.md, Cost).
+    gamma: tuple[float, float, float] = bounded((3.0, 4.0, 0.01), min=0.0, max=1e9)
+    # The rendering term is evaluated in 8-bit units (image value × 255), as in the paper's
+    # implementation: in 0..1 linear units the paper's γ over-regularise by 255² (the light
+    # distance then trades against the reflectance scale; light z off by centimetres).
+    rendering_scale: float = bounded(255.0, above=0.0, max=1e9)
+    light_mode: SettingsLightMode = "offset"
+    robust: Robust = "none"
+    # linear image units: RGB error where the robust loss bends
+    robust_scale: float = bounded(0.02, above=0.0, max=1e3)
+    outer_iterations: int = bounded(3, min=0, max=1000)
+    light_iterations: int = bounded(15, min=0, max=10_000)
+    # Each joint stage does most of its work in its first few steps; the shadow and
+    # observation rebuild between stages moves the problem more than later steps would.
+    joint_iterations: int = bounded(8, min=0, max=10_000)
+    # Vertices move along their normals (fixed per joint stage), not in 3-D as in the paper:
+    # shading and the geometric term are blind to tangential motion, along which they drift.
+    optimise_positions: bool = True
+    # Runaway guard: per joint stage a vertex moves at most ``max_step_edges`` of its local mean
+    # edge length, and at most ``max_total_edges`` (initial mesh's edges) from the initial mesh;
+    # vertices seen (at non-grazing angles) from fewer than ``min_views`` views keep their
+    # positions. One or two corrupted views otherwise pull silhouette vertices into spikes.
+    # The stage cap is as wide as the total one: a tighter cap clamps many vertices of a
+    # dense start from the first step, and LM's steps then no longer fit the clamped problem.
+    max_step_edges: float = bounded(2.0, min=0.0, max=1e6)
+    max_total_edges: float = bounded(2.0, min=0.0, max=1e6)
+    min_views: int = bounded(2, min=0, max=10_000)
+    # Coarse to fine: the rendering term's disparity cue reaches about as far as the blur of
+    # the images it samples, so a start a few pixels off is out of reach at full resolution.
+    # With ``coarse_blur_px`` > 0 the light stage and then ``coarse_levels`` joint stages sample
+    # images blurred by σ = coarse_blur_px, coarse_blur_px / 2, … (pixels at the median view's
+    # scale; nearer views are blurred more, so every view blurs the same patch of surface),
+    # and a vertex may move up to σ per coarse stage (the total limit grows by the same);
+    # the ``outer_iterations`` full-resolution stages follow.
+    coarse_blur_px: float = bounded(0.0, min=0.0, max=1000.0)
+    coarse_levels: int = bounded(2, min=0, max=20)
+    # stop when no vertex moved more than this × mean edge length
+    settle_position: float = bounded(0.02, min=0.0, max=1e6)
+    settle_light_m: float = bounded(1e-4, min=0.0, max=1e6)
+    sigma_chroma: float = bounded(0.03, min=0.0, max=1e6)
+    sigma_intensity: float = bounded(0.25, min=0.0, max=1e6)
+    # the 2-D estimate the solve starts from
+    init_smoothness: float = bounded(DEFAULT_SMOOTHNESS, min=0.0, max=1e9)
+    margin_px: float = bounded(1.0, min=0.0, max=10_000.0)
+    # Observations seen at grazing angles (cos(normal, view) below this) are dropped: their
+    # bilinear taps straddle the silhouette and mix in the background.
+    min_view_cos: float = bounded(0.3, min=-1.0, max=1.0)
+    shadow_eps: float = bounded(1e-4, min=0.0, max=1.0)
+    solver: SolverSettings = field(default_factory=SolverSettings)
+
+    @classmethod
+    def from_mapping(
+        cls, conf: Mapping[str, Any] | None, where: str = "config"
+    ) -> OptimiseSettings:
+        """Settings from the config's ``optimise`` section; errors name ``where`` and the key."""
+        return from_mapping(cls, conf, where, "optimise")
+
+
+@dataclass
+class OptimiseInput:
+    """The reconstruction's first half, as the optimiser needs it.
+
+    ``visibility`` (N, N_views) bool: V(i) per view. Observed colours come from
+    ``frames.images`` (sampled at the projections) or, without images, from ``observed``
+    (N, F, 3), NaN where not observed.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    visibility: np.ndarray
+    rig: Rig
+    frames: Frames
+    basis: SpectralBasis
+    observed: np.ndarray | None = None
+    initial_light: np.ndarray | None = None
+    initial_alpha: np.ndarray | None = None
