@@ -11,7 +11,7 @@ import logging
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from core.config import check_arguments
+from core.config import check_arguments, from_mapping
 from core.errors import RigError
 from drivers.device_set import DeviceSet
 from drivers.lights.k8062 import K8062_PID, VELLEMAN_VID
@@ -244,6 +244,15 @@ SPECTROMETERS: dict[str, Factory] = {
 
 # Drivers whose devices know the scene they show (GroundTruthSource), e.g. its true poses.
 GROUND_TRUTH_DRIVERS = frozenset({"sim"})
+
+
+def check_simulation(section: Mapping[str, Any], source: str) -> None:
+    """Check a profile's ``sim`` section's trajectory when the profile loads (the simulated
+    rig reads the section only when it opens); errors name ``source`` and the key."""
+    if "trajectory" in section:
+        from drivers.sim.trajectory import TrajectoryConfig
+
+        from_mapping(TrajectoryConfig, section["trajectory"], source, "sim.trajectory")
 
 KINDS = {"light": LIGHTS, "camera": CAMERAS, "projector": PROJECTORS, "spectrometer": SPECTROMETERS}
 # Names per kind, read by profile validation (rig.profile.known_drivers).

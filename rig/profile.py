@@ -20,7 +20,7 @@ from core.config import bounded, from_mapping, parse_value
 from core.errors import RigError
 from core.labels import is_reserved
 from core.yamlio import read_yaml
-from drivers.registry import DRIVERS, GROUND_TRUTH_DRIVERS
+from drivers.registry import DRIVERS, GROUND_TRUTH_DRIVERS, check_simulation
 from reconstruct.poses.board import BoardSpec
 
 DEVICE_KINDS = ("light", "camera", "projector", "spectrometer")
@@ -239,10 +239,7 @@ def parse_profile(data: Any, source: str) -> Profile:
     ):
         raise _fail(source, "poses", "is 'known' but no device is simulated",
                     "'estimate' for a real rig (known poses come only from the sim)")
-    if "trajectory" in top.sim:  # checked now: the sim reads it only when it opens
-        from drivers.sim.trajectory import TrajectoryConfig
-
-        from_mapping(TrajectoryConfig, top.sim["trajectory"], source, "sim.trajectory")
+    check_simulation(top.sim, source)  # now: the simulator reads it only when it opens
     calibration = top.calibration
     if calibration is not None:
         unnamed = {n: n for n in plan.illuminations if n not in calibration.lights}
