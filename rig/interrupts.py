@@ -9,7 +9,6 @@ Imports only the standard library: it is installed before anything heavy is impo
 
 from __future__ import annotations
 
-import importlib.abc
 import importlib.machinery
 import os
 import signal
@@ -117,8 +116,9 @@ def install(*, raising: bool = True) -> None:
     signal.pthread_sigmask(signal.SIG_UNBLOCK, SIGNALS)
 
 
-class _ReinstallAfter(importlib.abc.MetaPathFinder):
-    """Puts the handlers back as soon as a module that replaces them natively has loaded."""
+class _ReinstallAfter:
+    """A finder on ``sys.meta_path`` that puts the handlers back as soon as a module that
+    replaces them natively has loaded."""
 
     def find_spec(
         self, fullname: str, path: Sequence[str] | None, target: ModuleType | None = None
