@@ -54,6 +54,12 @@ class FrameRecord:
         return cls(**known)
 
 
+def record_paths(record: FrameRecord) -> list[str]:
+    """Every file a manifest line owns (the main one and any companions)."""
+    others = record.extra.get("other_files", [])
+    return [record.path, *(o["path"] for o in others if isinstance(o, dict) and "path" in o)]
+
+
 def append_manifest(session_dir: Path, record: FrameRecord) -> None:
     """Append one line and fsync it; called only after the frame's file is durable."""
     path = session_dir / MANIFEST_FILE

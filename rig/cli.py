@@ -1,4 +1,9 @@
-"""`rig` entry point: global options, subcommand dispatch, one-line errors."""
+"""`rig` entry point: global options, subcommand dispatch, one-line errors and stops.
+
+Only the standard library and light modules are imported here: the signal handlers are in
+place before anything heavy is, and `rig --help` builds its parser from light modules only
+(each command imports what it needs when it runs).
+"""
 
 from __future__ import annotations
 
@@ -7,17 +12,11 @@ import importlib
 import logging
 import signal
 import sys
-import threading
 from collections.abc import Sequence
-from types import FrameType
 from typing import NoReturn
 
-from rich.console import Console
-from rich.logging import RichHandler
-from rich.text import Text
-
 from core.errors import RigError
-from rig import __version__
+from rig import __version__, interrupts
 
 # Subcommand -> module in rig.commands exposing ``add_parser(subparsers)``.
 COMMANDS: tuple[str, ...] = (
@@ -67,6 +66,9 @@ def configure_logging(verbosity: int, debug: bool) -> None:
     """Quiet by default: warnings only on the terminal, INFO with -v, DEBUG with -vv. The level
     is set on the handler too: loggers that write INFO to recon/log.txt (``reconstruct``) set
     their own level, and their records would otherwise reach the terminal as well."""
+    from rich.console import Console
+    from rich.logging import RichHandler
+
     level = logging.WARNING
     if verbosity == 1:
         level = logging.INFO
@@ -77,70 +79,82 @@ def configure_logging(verbosity: int, debug: bool) -> None:
     logging.basicConfig(level=level, format="%(name)s: %(message)s", handlers=[handler], force=True)
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, handled like Ctrl-C: stages unwind, save their state and the CLI exits 143."""
-
-
-def _terminate(signum: int, frame: FrameType | None) -> None:
-    raise Terminated
-
-
-def handle_sigterm() -> None:
-    """Route SIGTERM to :class:`Terminated`. pycolmap's glog installs a C-level handler on
-    import that prints a native stack dump on SIGTERM; importing it first lets ours replace it."""
-    import pycolmap  # noqa: F401  (its import installs the handler ours must override)
-
-    if threading.current_thread() is threading.main_thread():  # signals go to the main thread
-        signal.signal(signal.SIGTERM, _terminate)
-
-
-def _line(label: str, style: str, message: str) -> Text:
-    """One error line printed literally: `[gphoto2]` or `[/x]` in a message is not markup."""
-    return Text.assemble((label, style), " ", message)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one `rig` command and return its exit status: 128 + N after signal N (SIGINT 130,
+    SIGTERM 143), with one line saying so, whatever the command was doing."""
+    previous = interrupts.handlers()
+    parsed: list[argparse.Namespace] = []  # the command line, once parsed
+    try:
+        interrupts.install()
+        try:
+            code: int | None = _run(argv, parsed)
+        except Exception as error:  # a failure a signal caused is reported as the signal
+            code = None if interrupts.received() is not None else _report(error, parsed)
+        if code is None or interrupts.received() is not None:
+            return _stopped(parsed)  # the signal was taken by the command (the capture loop)
+        return code
+    except KeyboardInterrupt:
+        return _stopped(parsed)
+    finally:
+        interrupts.restore(previous)
+
+
+def run() -> NoReturn:
+    """The `rig` program: a signal before the command starts or after it ends exits at once."""
+    interrupts.install(raising=False)
+    sys.exit(main())
+
+
+def _run(argv: Sequence[str] | None, parsed: list[argparse.Namespace]) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    parsed.append(args)
     configure_logging(args.verbose, args.debug)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    return int(args.func(args) or 0)
+
+
+def _report(error: Exception, parsed: list[argparse.Namespace]) -> int:
+    """One line for an error: 2 for one the user can fix, 1 for a bug."""
+    from rich.console import Console
+    from rich.text import Text
+
+    debug = bool(parsed and parsed[0].debug)
     err = Console(stderr=True, soft_wrap=True)
-    previous = signal.getsignal(signal.SIGTERM)
-    handle_sigterm()
-    try:
-        result = args.func(args)
-        return int(result or 0)
-    except RigError as error:
-        if args.debug:
-            err.print_exception()
-        err.print(_line("error:", "bold red", str(error)), highlight=False)
+    if debug:
+        err.print_exception()
+    # Text.assemble: `[gphoto2]` or `[/x]` in a message is printed, not taken as markup
+    if isinstance(error, RigError):
+        err.print(Text.assemble(("error:", "bold red"), " ", str(error)), highlight=False)
         return 2
-    except Terminated:
-        err.print(_line("terminated", "yellow", "(SIGTERM): state saved; run again to resume"))
-        return 143
-    except KeyboardInterrupt:
-        err.print("[yellow]interrupted[/]")
-        return 130
-    except Exception as error:
-        if args.debug:
-            err.print_exception()
-        else:
-            err.print(
-                _line(
-                    "internal error:",
-                    "bold red",
-                    f"{type(error).__name__}: {error} "
-                    "— run again with --debug for the traceback and report it",
-                ),
-                highlight=False,
-            )
-        return 1
-    finally:
-        if threading.current_thread() is threading.main_thread():
-            signal.signal(signal.SIGTERM, previous if previous is not None else signal.SIG_DFL)
+    if not debug:
+        err.print(
+            Text.assemble(
+                ("internal error:", "bold red"),
+                f" {type(error).__name__}: {error} "
+                "— run again with --debug for the traceback and report it",
+            ),
+            highlight=False,
+        )
+    return 1
+
+
+def _stopped(parsed: list[argparse.Namespace]) -> int:
+    """The line for a stop by signal, with how to resume when the command knows."""
+    # a KeyboardInterrupt no handler of ours saw is Ctrl-C (at a prompt, in a thread)
+    signum = interrupts.received() or signal.SIGINT
+    hint = ""
+    stop_hint = getattr(parsed[0], "stop_hint", None) if parsed else None
+    if stop_hint is not None:
+        try:
+            hint = stop_hint(parsed[0])
+        except Exception:  # the stop itself is what must be reported
+            hint = ""
+    print(interrupts.stop_line(signum, hint), file=sys.stderr, flush=True)
+    return interrupts.exit_status(signum)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run()

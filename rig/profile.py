@@ -21,6 +21,7 @@ from core.errors import RigError
 from core.labels import is_reserved
 from core.yamlio import read_yaml
 from drivers.registry import DRIVERS, GROUND_TRUTH_DRIVERS, check_simulation
+from profiles import shipped_profiles
 from reconstruct.poses.board import BoardSpec
 
 DEVICE_KINDS = ("light", "camera", "projector", "spectrometer")
@@ -183,12 +184,6 @@ class Profile:
 
     def device(self, kind: str) -> Mapping[str, Any] | None:
         return self.devices.get(kind)
-
-
-def shipped_profiles() -> list[str]:
-    """Names of the profiles shipped as package data."""
-    root = resources.files("profiles")
-    return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".yaml"))
 
 
 def resolve_profile(name_or_path: str | Path) -> Path:

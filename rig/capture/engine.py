@@ -28,6 +28,7 @@ from core.errors import RigError
 from core.manifest import FrameRecord
 from core.session import RAW_DIR
 from drivers.protocols import LightSource
+from rig import interrupts
 from rig.capture.board_check import look_for_board
 from rig.capture.devices import Ask, RigDevices, device_errors
 from rig.capture.frames import INCOMING, ExposureCheck, RawData, check_exposure, store_frame
@@ -76,6 +77,7 @@ class StopRequest:
         self._console = console
 
     def __call__(self, signum: int, frame: Any) -> None:
+        interrupts.note(signum)  # the command then exits 128 + signum
         if self.requested:
             raise KeyboardInterrupt
         self.requested = True

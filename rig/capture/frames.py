@@ -250,9 +250,3 @@ def store_frame(
 def _fsync_file(path: Path) -> None:
     with open(path, "rb+") as handle:
         os.fsync(handle.fileno())
-
-
-def record_paths(record: FrameRecord) -> list[str]:
-    """Every file a manifest line owns (the main one and any companions)."""
-    others = record.extra.get("other_files", [])
-    return [record.path, *(o["path"] for o in others if isinstance(o, dict) and "path" in o)]

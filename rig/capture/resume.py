@@ -20,9 +20,15 @@ from pathlib import Path
 
 from core.errors import RigError
 from core.files import fsync_dir, sha256_file, write_bytes_atomically
-from core.manifest import MANIFEST_FILE, FrameRecord, append_manifest, read_manifest
+from core.manifest import (
+    MANIFEST_FILE,
+    FrameRecord,
+    append_manifest,
+    read_manifest,
+    record_paths,
+)
 from core.session import RAW_DIR
-from rig.capture.frames import INCOMING, frame_name, record_paths, verify_file
+from rig.capture.frames import INCOMING, frame_name, verify_file
 from rig.plans import FrameSpec
 
 QUARANTINE_DIR = "quarantine"

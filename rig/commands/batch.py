@@ -7,13 +7,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from rich.console import Console
-
 from core.errors import MissingDependencyError, RigError
-from reconstruct.run.pipeline import load_config
 from rig.commands.reconstruct import EXIT_SKIPPED_FRAMES
 from rig.outpaths import output_file
-from rig.warmup import compile_kernels_once
 
 if TYPE_CHECKING:
     from rig.batch.task import Outcome
@@ -67,7 +63,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="CSV",
         help="also write the summary table (all columns) to this CSV file",
     )
-    parser.set_defaults(func=handle)
+    parser.set_defaults(func=handle, stop_hint=stop_hint)
+
+
+def stop_hint(args: argparse.Namespace) -> str:
+    return "run the same `rig batch` again: finished sessions are skipped, the others resume"
 
 
 def _run_batch() -> Callable[..., list[Outcome]]:
@@ -85,8 +85,12 @@ def _run_batch() -> Callable[..., list[Outcome]]:
 
 def handle(args: argparse.Namespace) -> int:
     run_batch = _run_batch()
+    from rich.console import Console
+
+    from reconstruct.run.pipeline import load_config
     from rig.batch.sessions import collect
     from rig.batch.summary import table, write_csv
+    from rig.warmup import compile_kernels_once
 
     if args.workers is not None and args.workers < 1:
         raise RigError(f"--workers {args.workers} is not a positive number", "give 1 or more")

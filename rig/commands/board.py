@@ -8,14 +8,20 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-
-from rich.console import Console
+from typing import TYPE_CHECKING
 
 from core.errors import RigError
-from core.files import write_bytes_atomically
-from reconstruct.poses.board import PAPER_SIZES_M, BoardSpec, write_sheet
-from reconstruct.poses.board.spec import DEFAULT_DICTIONARY, DEFAULT_MARKER_RATIO, DEFAULT_SQUARES
 from rig.outpaths import output_file
+
+if TYPE_CHECKING:
+    from reconstruct.poses.board import BoardSpec
+
+# The board library's defaults (reconstruct.poses.board.spec, which loads OpenCV), repeated so
+# that the parser stays light; a test keeps them equal.
+PAPER_SIZES = ("A4", "A3", "A2", "LETTER")  # = tuple(spec.PAPER_SIZES_M)
+DEFAULT_DICTIONARY = "DICT_5X5_100"  # = spec.DEFAULT_DICTIONARY
+DEFAULT_SQUARES = (10, 7)  # = spec.DEFAULT_SQUARES
+DEFAULT_MARKER_RATIO = 0.75  # = spec.DEFAULT_MARKER_RATIO
 
 
 def _squares(text: str) -> tuple[int, int]:
@@ -46,7 +52,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--size",
         default="A4",
         type=str.upper,
-        choices=list(PAPER_SIZES_M),
+        choices=PAPER_SIZES,
         help="paper size (default A4)",
     )
     parser.add_argument(
@@ -88,6 +94,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from reconstruct.poses.board import BoardSpec, write_sheet
+
     console = Console(soft_wrap=True)
     measured = None if args.measured_square_mm is None else args.measured_square_mm / 1000
     if args.snippet is not None:
@@ -138,6 +148,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _write_snippet(path: Path, spec: BoardSpec) -> None:
+    from core.files import write_bytes_atomically
+
     try:
         write_bytes_atomically(path, spec.to_yaml().encode())
     except OSError as exc:

@@ -1,7 +1,7 @@
 """`rig calibrate`: spectral calibration store, basis and illumination selection.
 
-The calibration library (colour-science, matplotlib) is imported inside the handlers so that
-building the `rig` parser stays fast for every other command.
+The calibration library (NumPy, colour-science, matplotlib) is imported inside the handlers so
+that building the `rig` parser stays fast for every other command.
 """
 
 from __future__ import annotations
@@ -11,21 +11,18 @@ import re
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-from rich.console import Console
-from rich.table import Table
-
-from calibration.grid import DEFAULT_GRID
 from core.errors import RigError
+from rig import wizard
 from rig.outpaths import output_dir, output_file
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from calibration.store import CalibrationStore
 
 ENV_STORE = "SPECTRAL_RIG_STORE"  # = calibration.store.ENV_STORE
 FORMATS = ("auto", "csv", "oceanview", "spectrawiz")  # = calibration.importers.FORMATS
 DEFAULT_CAMERA = "Canon EOS 5D Mark II"  # = calibration.defaults.DEFAULT_CAMERA
-console = Console()
 
 
 def _store_root(args: argparse.Namespace) -> Path:
@@ -53,6 +50,10 @@ def _slug(text: str) -> str:
 
 # -- list / show / remove / init-store ----------------------------------------------------------
 def cmd_list(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console()
     store = _store(args)
     table = Table(title=f"calibration store {store.root}")
     for col in ("name", "kind", "version", "added", "source / device"):
@@ -66,8 +67,12 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 
 def cmd_show(args: argparse.Namespace) -> int:
+    import numpy as np
+    from rich.console import Console
+
     from calibration.plots import plot_spectrum
 
+    console = Console()
     store = _store(args)
     entry = store.entry(args.name, args.version)
     w, v = store.read_native(entry)
@@ -90,6 +95,9 @@ def cmd_show(args: argparse.Namespace) -> int:
 
 
 def cmd_remove(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    console = Console()
     store = _store(args)
     versions = [e for e in store.entries() if e.name == args.name]
     if args.version is None and len(versions) > 1 and not args.all:
@@ -103,8 +111,11 @@ def cmd_remove(args: argparse.Namespace) -> int:
 
 
 def cmd_init_store(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
     from calibration.store import CalibrationStore
 
+    console = Console()
     root = output_dir(Path(args.dir), "DIR") if args.dir else _store_root(args)
     store = CalibrationStore.create_default(root)
     console.print(f"wrote default calibration store to {store.root}:")
@@ -118,9 +129,13 @@ def cmd_init_store(args: argparse.Namespace) -> int:
 
 # -- import -------------------------------------------------------------------------------------
 def cmd_import(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from calibration.grid import DEFAULT_GRID
     from calibration.importers import read_spectrum
     from calibration.spectra import resample
 
+    console = Console()
     store = _store(args, must_exist=False)
     spectrum = read_spectrum(args.file, args.format)
     values = spectrum.column(args.column, args.kind)
@@ -157,11 +172,17 @@ def cmd_import(args: argparse.Namespace) -> int:
 
 # -- basis --------------------------------------------------------------------------------------
 def cmd_basis(args: argparse.Namespace) -> int:
+    import numpy as np
+    from rich.console import Console
+    from rich.table import Table
+
     from calibration.basis import default_basis, pca_basis
+    from calibration.grid import DEFAULT_GRID
     from calibration.importers import read_reflectance_set
     from calibration.plots import plot_basis
     from calibration.spectra import resample
 
+    console = Console()
     output_file(Path(args.plot), "--plot")
     if args.out:
         output_file(Path(args.out), "--out")
@@ -201,6 +222,7 @@ def cmd_basis(args: argparse.Namespace) -> int:
 # -- select -------------------------------------------------------------------------------------
 def _candidates(args: argparse.Namespace, store: CalibrationStore | None) -> dict[str, np.ndarray]:
     from calibration import defaults
+    from calibration.grid import DEFAULT_GRID
     from calibration.selection import channel_mixtures
 
     grid = DEFAULT_GRID
@@ -244,14 +266,19 @@ def _candidates(args: argparse.Namespace, store: CalibrationStore | None) -> dic
 
 
 def cmd_select(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
     from calibration import defaults
     from calibration.basis import SpectralBasis, default_basis
+    from calibration.grid import DEFAULT_GRID
     from calibration.importers import read_reflectance_set
     from calibration.plots import plot_selection
     from calibration.selection import rank_illumination_sets
     from calibration.spectra import resample
     from calibration.store import CalibrationStore
 
+    console = Console()
     output_file(Path(args.plot), "--plot")
 
     if args.top < 1:
@@ -387,7 +414,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("dir", nargs="?", help="directory (default: --store or the default store)")
     p.set_defaults(func=cmd_init_store)
 
-    from rig import wizard  # imported here so other subcommands start fast
     p = sub.add_parser("wizard", help="guided measurement of the lights and camera")
     wizard.add_arguments(p)
     p.set_defaults(func=wizard.run)

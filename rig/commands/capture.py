@@ -6,13 +6,10 @@ import argparse
 import importlib
 from pathlib import Path
 
-from rich.console import Console
-
 from core.errors import RigError
-from rig.capture import CaptureStopped, run_capture
+from profiles import shipped_profiles
+from rig import interrupts
 from rig.outpaths import output_dir
-from rig.profile import shipped_profiles
-from rig.warmup import compile_kernels_once
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -49,10 +46,27 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="on --resume, open devices whose session snapshot runs a program "
         "(subprocess transport) without asking",
     )
-    parser.set_defaults(func=handle)
+    parser.set_defaults(func=handle, stop_hint=stop_hint)
+
+
+def stop_hint(args: argparse.Namespace) -> str:
+    from core.session import SESSION_FILE
+
+    session = args.resume if args.resume is not None else args.out
+    if (session / SESSION_FILE).is_file():
+        return f"every completed frame is saved; resume with `rig capture --resume {session}`"
+    profile = args.profile or "sim"
+    return (
+        f"no frame was captured; `rig capture --resume {session} --profile {profile}` "
+        "starts it afresh"
+    )
 
 
 def handle(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from rig.capture import CaptureStopped, run_capture
+
     console = Console(stderr=True)
     session = args.resume if args.resume is not None else args.out
     output_dir(session, "--resume" if args.resume is not None else "--out")
@@ -69,7 +83,8 @@ def handle(args: argparse.Namespace) -> int:
             trust_devices=args.trust_session_devices,
         )
     except CaptureStopped as stopped:
-        console.print(f"[yellow]{stopped}[/]", highlight=False)
+        if interrupts.received() is None:  # 'q' or Ctrl-C at a prompt; a signal gets its line
+            console.print(f"[yellow]{stopped}[/]", highlight=False)
         return 130
     print(out)
     if args.reconstruct:
@@ -79,6 +94,8 @@ def handle(args: argparse.Namespace) -> int:
 
 def reconstruct(session: Path) -> int:
     """Run the reconstruction pipeline on a finished session."""
+    from rig.warmup import compile_kernels_once
+
     try:
         pipeline = importlib.import_module("reconstruct.run.pipeline")
     except ImportError as exc:

@@ -9,22 +9,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-import yaml
-from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
-
 from core.errors import RigError
-from reconstruct.model.camera import read_colmap_text
-from reconstruct.outputs.evaluate import evaluate, load_mesh, surface_distance
-from reconstruct.poses.board import umeyama
-from reconstruct.poses.output import SUMMARY as POSE_SUMMARY
-from reconstruct.run.logfile import run_logged
-from rig.capture import run_capture
-from rig.demo_profile import demo_profile
 from rig.outpaths import output_dir
-from rig.warmup import compile_kernels_once
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -42,6 +28,18 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
+    import numpy as np
+    import yaml
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+    from rich.table import Table
+
+    from reconstruct.outputs.evaluate import evaluate
+    from reconstruct.run.logfile import run_logged
+    from rig.capture import run_capture
+    from rig.demo_profile import demo_profile
+    from rig.warmup import compile_kernels_once
+
     if args.views < 6:
         raise RigError(f"--views {args.views} is too few", "use at least 6 views (default 20)")
     out = output_dir(Path(args.out), "--out").resolve()
@@ -119,6 +117,10 @@ def handle(args: argparse.Namespace) -> int:
 
 def initial_accuracy(initial: Path, truth: Path) -> float:
     """Mean distance from the initial (subdivided MVS) mesh's vertices to the true surface."""
+    import numpy as np
+
+    from reconstruct.outputs.evaluate import load_mesh, surface_distance
+
     mesh = load_mesh(initial)
     distance, _, _ = surface_distance(np.asarray(mesh.vertices, dtype=float), load_mesh(truth))
     return float(np.mean(distance))
@@ -128,6 +130,12 @@ def pose_errors(estimated: Path, truth: Path) -> tuple[str, str, str]:
     """Estimated poses (recon/poses) against the simulator's, matched by image name: camera
     centre and rotation errors. Poses with a relative scale are first aligned to the truth by a
     similarity (Umeyama); metric poses (board, known) are compared as they are."""
+    import numpy as np
+
+    from reconstruct.model.camera import read_colmap_text
+    from reconstruct.poses.board import umeyama
+    from reconstruct.poses.output import SUMMARY as POSE_SUMMARY
+
     summary = json.loads((estimated / POSE_SUMMARY).read_text())
     _, est_images = read_colmap_text(estimated)
     _, true_images = read_colmap_text(truth)

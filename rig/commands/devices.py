@@ -11,14 +11,6 @@ import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from rich.console import Console
-from rich.markup import escape
-from rich.table import Table
-
-from drivers.lights.udmx import UDMX_PRODUCT
-from drivers.registry import OCEAN_VID, USB_IDS
-from drivers.transports.usb_device import string_descriptor
-
 
 @dataclass(frozen=True)
 class Found:
@@ -32,6 +24,8 @@ Probe = Callable[[], tuple[list[Found], list[str]]]
 
 
 def _driver_for(vid: int | None, pid: int | None) -> tuple[str, str] | None:
+    from drivers.registry import OCEAN_VID, USB_IDS
+
     if vid is None or pid is None:
         return None
     if vid == OCEAN_VID:
@@ -82,6 +76,9 @@ def probe_hid() -> tuple[list[Found], list[str]]:
 
 
 def probe_usb() -> tuple[list[Found], list[str]]:
+    from drivers.lights.udmx import UDMX_PRODUCT
+    from drivers.transports.usb_device import string_descriptor
+
     usb_core = importlib.import_module("usb.core")
     try:
         devices = list(usb_core.find(find_all=True))
@@ -153,6 +150,10 @@ def discover(probes: tuple[Probe, ...] = PROBES) -> tuple[list[Found], list[str]
 
 
 def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.markup import escape
+    from rich.table import Table
+
     rows, notes = discover()
     console = Console()
     if rows:

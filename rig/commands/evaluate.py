@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from rich.console import Console
-from rich.table import Table
-
-from core.session import RECON_DIR
-from reconstruct.outputs import export
-from reconstruct.outputs.evaluate import Evaluation, evaluate
 from rig.commands.relight import parse_xyz
+
+if TYPE_CHECKING:
+    from rich.table import Table
+
+    from reconstruct.outputs.evaluate import Evaluation
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -31,6 +31,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def table(ev: Evaluation, title: str = "evaluation") -> Table:
+    from rich.table import Table
+
     out = Table(title=title, show_header=False)
     for key, value in ev.table():
         out.add_row(key, value)
@@ -38,6 +40,12 @@ def table(ev: Evaluation, title: str = "evaluation") -> Table:
 
 
 def handle(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from core.session import RECON_DIR
+    from reconstruct.outputs import export
+    from reconstruct.outputs.evaluate import evaluate
+
     recon = Path(args.recon)
     if recon.is_dir() and not (recon / export.REFLECTANCE_FILE).is_file():
         recon = recon / RECON_DIR

@@ -5,18 +5,14 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-
-from rich.console import Console
-from rich.table import Table
-from rich.text import Text
+from typing import TYPE_CHECKING
 
 from core.errors import RigError
-from core.session import RECON_DIR, Session
-from reconstruct.frames.decode import list_unusable
-from reconstruct.run.logfile import run_logged
-from reconstruct.run.pipeline import Reconstruction, load_config
-from reconstruct.run.status import describe, read_status
-from rig.warmup import compile_kernels_once
+
+if TYPE_CHECKING:
+    from rich.console import Console
+
+    from reconstruct.run.pipeline import Reconstruction
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -44,10 +40,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="print the state of the last run on SESSION (running, complete, failed, "
         "interrupted) and exit",
     )
-    parser.set_defaults(func=handle)
+    parser.set_defaults(func=handle, stop_hint=stop_hint)
+
+
+def stop_hint(args: argparse.Namespace) -> str:
+    return f"run `rig reconstruct {args.session}` again (same options) to resume where it stopped"
 
 
 def summary(console: Console, rec: Reconstruction) -> None:
+    from rich.table import Table
+
     light = rec.report["light"]
     table = Table(title="reconstruction", show_header=False)
     table.add_row(
@@ -74,14 +76,27 @@ EXIT_SKIPPED_FRAMES = 3
 
 
 def handle(args: argparse.Namespace) -> int:
-    console = Console(stderr=True)
+    from core.session import RECON_DIR, Session
+
     if args.status:
+        from reconstruct.run.status import describe, read_status
+
         print(describe(read_status(Path(args.session) / RECON_DIR)))
         return 0
     if args.initial_mesh is not None and not args.initial_mesh.is_file():
         raise RigError(
             f"--initial-mesh {args.initial_mesh} is not a file", "give a PLY, OBJ, STL, OFF or GLB"
         )
+    # the pipeline (pycolmap, numba, OpenCV) is imported for a run only
+    from rich.console import Console
+    from rich.text import Text
+
+    from reconstruct.frames.decode import list_unusable
+    from reconstruct.run.logfile import run_logged
+    from reconstruct.run.pipeline import load_config
+    from rig.warmup import compile_kernels_once
+
+    console = Console(stderr=True)
     config = load_config(args.config)
     session = Session.open(args.session)  # a wrong path fails now, not after the warm-up
     compile_kernels_once(console)

@@ -6,15 +6,13 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from core.errors import RigError
-from core.session import RECON_DIR
-from reconstruct.outputs import export
-from reconstruct.outputs.relight import Camera, encode_srgb, load_camera_file, relight, write_png
-from reconstruct.poses.output import load as load_poses
 from rig.outpaths import output_file
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -49,6 +47,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def parse_xyz(text: str, what: str) -> np.ndarray:
+    import numpy as np
+
     try:
         v = np.array([float(x) for x in text.split(",")])
     except ValueError as error:
@@ -64,6 +64,19 @@ def parse_xyz(text: str, what: str) -> np.ndarray:
 
 def handle(args: argparse.Namespace) -> int:
     # Every argument is checked before the reconstruction is read.
+    import numpy as np
+
+    from core.session import RECON_DIR
+    from reconstruct.outputs import export
+    from reconstruct.outputs.relight import (
+        Camera,
+        encode_srgb,
+        load_camera_file,
+        relight,
+        write_png,
+    )
+    from reconstruct.poses.output import load as load_poses
+
     if args.out is not None:
         output_file(args.out, "--out")
     if not (np.isfinite(args.exposure) and args.exposure > 0):

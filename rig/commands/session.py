@@ -6,15 +6,11 @@ import argparse
 import datetime as dt
 from collections import Counter
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from rich.console import Console
-
-from core.files import sha256_file
-from core.manifest import FrameProblem, verify_frames
-from core.session import Session
-from rig.capture.frames import INCOMING, record_paths
-from rig.capture.resume import QUARANTINE_DIR, REASONS_FILE
+if TYPE_CHECKING:
+    from core.manifest import FrameProblem
+    from core.session import Session
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -31,6 +27,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def handle_verify(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from core.manifest import verify_frames
+    from core.session import Session
+
     session = Session.open(args.session, bound_views=False)
     console = Console(soft_wrap=True)
     problems = verify_frames(session.root, session.frames)
@@ -70,6 +71,10 @@ def handle_verify(args: argparse.Namespace) -> int:
 def stray_files(session: Session) -> list[str]:
     """Files no manifest line owns (orphans, unfinished downloads), quarantined files, and
     lines naming a view beyond the plan: each makes the session not verified."""
+    from core.manifest import record_paths
+    from rig.capture.frames import INCOMING
+    from rig.capture.resume import QUARANTINE_DIR, REASONS_FILE
+
     owned = {p for r in session.frames for p in record_paths(r)}
     lines = []
     raw = session.raw_dir
@@ -100,6 +105,9 @@ def stray_files(session: Session) -> list[str]:
 
 def companion_problems(session: Session) -> list[FrameProblem]:
     """Files delivered with a frame (e.g. a JPEG beside the RAW) are checked like the frame."""
+    from core.files import sha256_file
+    from core.manifest import FrameProblem
+
     problems = []
     for record in session.frames:
         for other in record.extra.get("other_files", []):
@@ -112,6 +120,10 @@ def companion_problems(session: Session) -> list[FrameProblem]:
 
 
 def handle_info(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from core.session import Session
+
     session = Session.open(args.session)
     console = Console(soft_wrap=True)
     for line in summarise(session):
@@ -121,6 +133,8 @@ def handle_info(args: argparse.Namespace) -> int:
 
 def summarise(session: Session) -> list[str]:
     """Human-readable summary lines of a session."""
+    from core.manifest import record_paths
+
     info = session.info
     plan = info.plan
     frames = session.frames

@@ -5,14 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rich.console import Console
-
-from calibration.grid import SpectralGrid
 from core.errors import RigError
-from rig.view.colour import DEFAULT_ILLUMINANTS, illuminant_matrices
-from rig.view.data import load_view_data
-from rig.view.page import build_page
-from rig.view.serve import serve
+
+# rig.view.colour's (it loads colour-science), repeated so that the parser stays light; a test
+# keeps them equal.
+DEFAULT_ILLUMINANTS = ("D65", "A", "FL2", "FL11", "LED-B3", "LED-V1")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -34,6 +31,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from calibration.grid import SpectralGrid
+    from rig.view.colour import illuminant_matrices
+    from rig.view.data import load_view_data
+    from rig.view.page import build_page
+    from rig.view.serve import serve
+
     console = Console(stderr=True)
     if args.export is not None and args.export.is_dir():
         raise RigError(f"--export {args.export} is a folder", "give a file name ending in .html")

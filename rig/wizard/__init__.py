@@ -16,21 +16,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rich.console import Console
-
-from calibration import defaults
-from calibration.grid import DEFAULT_GRID
-from calibration.spectra import resample
-from calibration.store import CalibrationStore
 from core.errors import RigError
-from rig.capture.devices import open_devices
-from rig.profile import load_profile
-from rig.wizard.camera import choose_camera
-from rig.wizard.common import Ask
-from rig.wizard.lights import measure_lights, parse_imports, plot_light
-from rig.wizard.reference import parse_region
-from rig.wizard.scale import scale_lights
-from rig.wizard.selection import selection_report
+
+# calibration.defaults.camera_names() (it loads colour-science), repeated so that the `rig`
+# parser stays light; a test keeps them equal.
+BUILTIN_CAMERAS = ("Canon EOS 5D Mark II", "Nikon 5100", "Sigma SD Merrill")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -60,7 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     camera = parser.add_mutually_exclusive_group()
     camera.add_argument(
-        "--camera", help=f"built-in sensitivity ({', '.join(defaults.camera_names())})"
+        "--camera", help=f"built-in sensitivity ({', '.join(BUILTIN_CAMERAS)})"
     )
     camera.add_argument(
         "--camera-file", metavar="CSV", help="measured sensitivity wavelength_nm,R,G,B"
@@ -92,6 +82,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from calibration import defaults
+    from calibration.grid import DEFAULT_GRID
+    from calibration.spectra import resample
+    from calibration.store import CalibrationStore
+    from rig.capture.devices import open_devices
+    from rig.profile import load_profile
+    from rig.wizard.camera import choose_camera
+    from rig.wizard.common import Ask
+    from rig.wizard.lights import measure_lights, parse_imports, plot_light
+    from rig.wizard.reference import parse_region
+    from rig.wizard.scale import scale_lights
+    from rig.wizard.selection import selection_report
+
     console = Console(stderr=True)
     ask: Ask | None = None if args.yes else console.input
     profile = load_profile(args.profile)

@@ -49,6 +49,15 @@ def test_capture_bench(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
+def test_startup_bench(tmp_path: Path) -> None:
+    data = run_bench("bench.startup", tmp_path)
+    commands = data["commands"]
+    assert len(commands) == 4 and all(c["wall_s"] > 0 for c in commands.values())
+    assert all(c["heavy"] == [] for c in commands.values())
+    assert not (tmp_path / "startup_work").exists()
+
+
+@pytest.mark.slow
 def test_solver_bench(tmp_path: Path) -> None:
     data = run_bench("bench.solver", tmp_path)
     (run,) = data["runs"]

@@ -118,11 +118,10 @@ def test_a_wrong_session_fails_before_the_warm_up(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ):
     """A typo in the session path on a fresh install is reported at once, not after ~1 min."""
-    from rig import cli
-    from rig.commands import reconstruct
+    from rig import cli, warmup
 
     calls: list[object] = []
-    monkeypatch.setattr(reconstruct, "compile_kernels_once", calls.append)
+    monkeypatch.setattr(warmup, "compile_kernels_once", calls.append)
     assert cli.main(["reconstruct", str(tmp_path / "nowhere")]) != 0
     assert "is not a session directory" in capsys.readouterr().err
     assert calls == []

@@ -1,0 +1,149 @@
+"""SIGINT and SIGTERM for `rig`, from a command's first instant to its exit: the first one
+raises :class:`Interrupted` (a KeyboardInterrupt, so running code saves its state as for
+Ctrl-C) and the command exits 128 + its number with one line; later ones are noted, never
+raised, so the state being saved is not cut short. Outside a command (start-up, exit) a
+signal ends the process at once with the same status and line.
+
+Imports only the standard library: it is installed before anything heavy is imported.
+"""
+
+from __future__ import annotations
+
+import importlib.machinery
+import os
+import signal
+import sys
+import threading
+from collections.abc import Callable, Sequence
+from types import FrameType, ModuleType
+from typing import Any
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+# pycolmap's glog replaces the SIGTERM handler natively when this module loads, to print a
+# stack dump; the handlers are put back right after it.
+NATIVE_HANDLER_MODULES = frozenset({"pycolmap._core"})
+
+Handler = Callable[[int, FrameType | None], Any] | int | None
+
+
+class Interrupted(KeyboardInterrupt):
+    """Signal ``signum`` arrived while a command ran."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+class _State:
+    first: int | None = None  # the first signal since install()
+    raising = False  # a command runs: the first signal raises Interrupted
+
+
+_state = _State()
+
+
+def exit_status(signum: int) -> int:
+    """The shell's convention: 130 for SIGINT, 143 for SIGTERM."""
+    return 128 + signum
+
+
+def stop_line(signum: int, hint: str = "") -> str:
+    name = signal.Signals(signum).name
+    return f"rig: stopped by {name} (exit {exit_status(signum)})" + (f"; {hint}" if hint else "")
+
+
+def received() -> int | None:
+    """The first signal since the handlers were installed, if any."""
+    return _state.first
+
+
+def note(signum: int) -> None:
+    """Record a signal another handler took (the capture loop's stop-after-this-frame)."""
+    if _state.first is None:
+        _state.first = signum
+
+
+def _handle(signum: int, frame: FrameType | None) -> None:
+    if _state.first is not None:
+        return  # already stopping
+    _state.first = signum
+    if _state.raising:
+        raise Interrupted(signum)
+    _exit_now(signum)
+
+
+def _exit_now(signum: int) -> None:
+    """Nothing is running that could save state: flush what was printed, say why, exit."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except Exception:  # a stream closed or in the middle of a write: the line still goes
+            pass
+    os.write(2, (stop_line(signum) + "\n").encode())
+    os._exit(exit_status(signum))
+
+
+def _in_main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
+def handlers() -> dict[int, Handler]:
+    """The handlers now installed, for :func:`restore`."""
+    return {s: signal.getsignal(s) for s in SIGNALS} if _in_main_thread() else {}
+
+
+def restore(previous: dict[int, Handler]) -> None:
+    _state.raising = False
+    for sig, handler in previous.items():
+        signal.signal(sig, signal.SIG_DFL if handler is None else handler)
+
+
+def _set_handlers() -> None:
+    for sig in SIGNALS:
+        signal.signal(sig, _handle)
+
+
+def install(*, raising: bool = True) -> None:
+    """Handle both signals from now on (main thread only: Python runs handlers there). With
+    ``raising`` the first one raises :class:`Interrupted`; without, it exits at once. Signals a
+    launcher blocked until now are delivered here."""
+    if not _in_main_thread():
+        return
+    _state.first = None
+    _state.raising = raising
+    _set_handlers()
+    _reinstall_after_native_imports()
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, SIGNALS)
+
+
+class _ReinstallAfter:
+    """A finder on ``sys.meta_path`` that puts the handlers back as soon as a module that
+    replaces them natively has loaded."""
+
+    def find_spec(
+        self, fullname: str, path: Sequence[str] | None, target: ModuleType | None = None
+    ) -> importlib.machinery.ModuleSpec | None:
+        if fullname not in NATIVE_HANDLER_MODULES:
+            return None
+        spec = importlib.machinery.PathFinder.find_spec(fullname, path, target)
+        if spec is None or spec.loader is None:
+            return spec
+        exec_module = spec.loader.exec_module
+
+        def exec_then_reinstall(module: ModuleType) -> None:
+            try:
+                exec_module(module)
+            finally:
+                if _in_main_thread() and signal.getsignal(signal.SIGTERM) is _handle:
+                    _set_handlers()
+
+        spec.loader.exec_module = exec_then_reinstall  # type: ignore[method-assign]
+        return spec
+
+
+_hook = _ReinstallAfter()
+
+
+def _reinstall_after_native_imports() -> None:
+    if _hook not in sys.meta_path:
+        sys.meta_path.insert(0, _hook)

@@ -1,0 +1,178 @@
+"""SIGINT and SIGTERM in `rig`: 130 / 143 and one line whatever the command was doing, a second
+signal while state is saved neither lost nor raised, pycolmap's native SIGTERM handler
+replaced, and signals before or after the command exiting at once."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from rig import cli, interrupts
+from rig.commands import session as session_command
+
+REPO = Path(__file__).resolve().parents[2]
+STOP_LINE = "rig: stopped by"
+
+
+def run_with(
+    monkeypatch: pytest.MonkeyPatch, command: Callable[[argparse.Namespace], int]
+) -> int:
+    """`rig session info X` with its handler replaced by ``command``."""
+    monkeypatch.setattr(session_command, "handle_info", command)
+    return cli.main(["session", "info", "x"])
+
+
+def kill_self(signum: int) -> None:
+    os.kill(os.getpid(), signum)
+
+
+def one_stop_line(err: str, name: str, code: int) -> None:
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert lines and lines[-1].startswith(f"{STOP_LINE} {name} (exit {code})"), err
+    assert sum(STOP_LINE in line for line in lines) == 1, err
+    assert "Traceback" not in err and "internal error" not in err
+
+
+@pytest.mark.parametrize(("signum", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_during_a_command_exits_128_plus_its_number(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], signum: int, code: int
+) -> None:
+    saved: list[str] = []
+
+    def command(args: argparse.Namespace) -> int:
+        try:
+            kill_self(signum)
+            raise AssertionError("the signal did not stop the command")
+        finally:
+            saved.append("state")  # unwinding code runs, as for Ctrl-C
+
+    before = {s: signal.getsignal(s) for s in interrupts.SIGNALS}
+    assert run_with(monkeypatch, command) == code
+    one_stop_line(capsys.readouterr().err, signal.Signals(signum).name, code)
+    assert saved == ["state"]
+    assert {s: signal.getsignal(s) for s in interrupts.SIGNALS} == before
+
+
+def test_a_second_signal_while_saving_state_is_noted_not_raised(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    saved: list[str] = []
+
+    def command(args: argparse.Namespace) -> int:
+        try:
+            kill_self(signal.SIGTERM)
+        finally:
+            kill_self(signal.SIGINT)  # the user presses Ctrl-C as the state is written
+            saved.append("state")
+        return 0
+
+    assert run_with(monkeypatch, command) == 143
+    one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
+    assert saved == ["state"]
+
+
+def test_a_failure_the_signal_caused_is_reported_as_the_signal(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    def command(args: argparse.Namespace) -> int:
+        try:
+            kill_self(signal.SIGTERM)
+        except KeyboardInterrupt as exc:  # e.g. a library turning it into its own error
+            raise RuntimeError("Cannot import the C++ backend") from exc
+        return 0
+
+    assert run_with(monkeypatch, command) == 143
+    one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
+
+
+def test_a_signal_the_command_took_itself_still_sets_the_exit_status(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The capture loop takes SIGTERM to finish the frame in flight, then returns normally."""
+
+    def command(args: argparse.Namespace) -> int:
+        interrupts.note(signal.SIGTERM)
+        return 0
+
+    assert run_with(monkeypatch, command) == 143
+    one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
+
+
+def test_the_stop_line_says_how_to_resume_a_capture(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from rig.commands import capture
+
+    args = argparse.Namespace(out=tmp_path / "s", resume=None, profile="sim")
+    assert "--resume" in capture.stop_hint(args) and "--profile sim" in capture.stop_hint(args)
+    (tmp_path / "s").mkdir()
+    (tmp_path / "s" / "session.yaml").write_text("{}")
+    assert capture.stop_hint(args) == (
+        f"every completed frame is saved; resume with `rig capture --resume {tmp_path / 's'}`"
+    )
+
+
+def python(code: str, *, block: bool = False) -> subprocess.CompletedProcess[str]:
+    """``python -c code`` from the repository, optionally started with both signals blocked."""
+    def blocked() -> None:
+        signal.pthread_sigmask(signal.SIG_BLOCK, interrupts.SIGNALS)
+
+    return subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        preexec_fn=blocked if block else None,
+        check=False,
+    )
+
+
+def test_pycolmap_native_sigterm_handler_is_replaced() -> None:
+    """Its glog would print a native stack dump and kill the process."""
+    proc = python(
+        "import os, signal, time\n"
+        "from rig import interrupts\n"
+        "interrupts.install()\n"
+        "import pycolmap\n"
+        "try:\n"
+        "    os.kill(os.getpid(), signal.SIGTERM); time.sleep(10)\n"
+        "except interrupts.Interrupted as stop:\n"
+        "    raise SystemExit(interrupts.exit_status(stop.signum))\n"
+    )
+    assert proc.returncode == 143, proc.stderr
+    assert "*** Aborted" not in proc.stderr and "received by PID" not in proc.stderr
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_outside_a_command_a_signal_exits_at_once_with_the_line(signum: int) -> None:
+    proc = python(
+        "import os, sys, time\n"
+        "from rig import interrupts\n"
+        "interrupts.install(raising=False)\n"
+        "print('printed before', flush=False)\n"
+        f"os.kill(os.getpid(), {int(signum)}); time.sleep(10)\n"
+    )
+    code = interrupts.exit_status(signum)
+    assert proc.returncode == code and proc.stdout == "printed before\n"
+    assert proc.stderr == f"{STOP_LINE} {signal.Signals(signum).name} (exit {code})\n"
+
+
+def test_a_signal_sent_before_the_handlers_existed_is_taken_when_they_do() -> None:
+    """A launcher that blocked the signals: they wait, then stop the command at its start."""
+    proc = python(
+        "import os, signal\n"
+        "os.kill(os.getpid(), signal.SIGTERM)\n"
+        "from rig.cli import run\n"
+        "run()\n",
+        block=True,
+    )
+    assert proc.returncode == 143, proc.stderr
+    assert proc.stderr == f"{STOP_LINE} SIGTERM (exit 143)\n"
