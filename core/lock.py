@@ -21,6 +21,7 @@ import fcntl
 import json
 import os
 import socket
+import stat
 import threading
 import time
 from collections.abc import Iterator
@@ -62,17 +63,24 @@ def _now() -> str:
 
 
 def _open(path: Path) -> int:
-    """The lock file, created if missing; never through a link."""
+    """The lock file, created if missing; never through a link (the holder writes into it)."""
+    remove = f"remove {path} (a lock file that commands recreate)"
     try:
-        return os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
     except OSError as error:
         if error.errno in (errno.EROFS, errno.EACCES, errno.EPERM):
             fix = f"make {path.parent} writable, or copy it to a writable disk"
         elif error.errno == errno.ENOENT:
             fix = "give an existing folder"
         else:
-            fix = f"remove {path} (a lock file that commands recreate)"
+            fix = remove
         raise RigError(f"cannot open the lock file {path} ({error.strerror})", fix) from error
+    info = os.fstat(fd)
+    if not stat.S_ISREG(info.st_mode) or info.st_nlink > 1:
+        os.close(fd)
+        what = "has other names (a hard link)" if info.st_nlink > 1 else "is not a plain file"
+        raise RigError(f"the lock file {path} {what}", remove)
+    return fd
 
 
 def _try_lock(fd: int, path: Path) -> bool:
@@ -99,7 +107,7 @@ def _is_current(fd: int, path: Path) -> bool:
 
 
 def _read_holder(fd: int) -> dict[str, object]:
-    """The description its holder wrote (empty if it has not yet, or it is not ours)."""
+    """The description its holder wrote (empty if it has not written it yet)."""
     deadline = time.monotonic() + HOLDER_WAIT_S
     while True:
         try:
@@ -111,7 +119,7 @@ def _read_holder(fd: int) -> dict[str, object]:
         time.sleep(POLL_S)
 
 
-def in_use(folder: Path, holder: dict[str, object]) -> InUse:
+def _in_use(folder: Path, holder: dict[str, object]) -> InUse:
     """The one-line refusal naming the holder."""
     if holder:
         who = (
@@ -142,7 +150,7 @@ def _acquire(folder: Path, command: str, wait_s: float) -> int:
                     _write_holder(fd, command)
                     return fd
             elif time.monotonic() >= deadline:
-                raise in_use(folder, _read_holder(fd))
+                raise _in_use(folder, _read_holder(fd))
             else:
                 time.sleep(POLL_S)
         except BaseException:
@@ -154,7 +162,7 @@ def _acquire(folder: Path, command: str, wait_s: float) -> int:
 def _release(folder: Path, hold: _Hold) -> None:
     path = folder / LOCK_FILE
     try:
-        if _is_current(hold.fd, path):  # removed while locked: a waiter then tries afresh
+        if _is_current(hold.fd, path):  # only our own file; a waiter locking it then retries
             path.unlink()
     except OSError:
         pass  # a read-only folder keeps the file; the kernel still drops the lock below

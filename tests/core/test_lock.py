@@ -145,6 +145,15 @@ def test_a_missing_folder_or_a_bad_lock_file_is_one_clear_error(tmp_path: Path) 
     with pytest.raises(RigError, match=r"cannot open the lock file"), locked(tmp_path, "x"):
         pass
     assert victim.read_text() == "precious"
+    (tmp_path / LOCK_FILE).unlink()
+    os.link(victim, tmp_path / LOCK_FILE)  # a hard link: writing the holder would change it
+    with pytest.raises(RigError, match=r"\.lock has other names .* remove"), locked(tmp_path, "x"):
+        pass
+    assert victim.read_text() == "precious"
+    (tmp_path / LOCK_FILE).unlink()
+    os.mkfifo(tmp_path / LOCK_FILE)
+    with pytest.raises(RigError, match=r"\.lock is not a plain file"), locked(tmp_path, "x"):
+        pass
 
 
 def test_output_lock_holds_the_enclosing_session_only(tmp_path: Path) -> None:

@@ -304,6 +304,9 @@ def lock_file(kind: str, argv: Callable[[Path], list[str]]) -> Prepare:
             lock.write_text(json.dumps(record))
         elif kind == "folder":
             lock.mkdir()
+        elif kind == "hard link":  # writing the holder into it would change the victim
+            (tmp / "victim.csv").write_text("precious")
+            os.link(tmp / "victim.csv", lock)
         else:
             (tmp / "victim.csv").write_text("precious")
             lock.symlink_to(tmp / "victim.csv")
@@ -348,6 +351,7 @@ LOCK_CASES = [
     Case("lock file of a dead process", lock_file("dead", resume), 0, ("capture complete",)),
     Case("lock file a folder", lock_file("folder", resume), 2, ("cannot open the lock file",)),
     Case("lock file a link out", lock_file("link", resume), 2, ("cannot open the lock file",)),
+    Case("lock file a hard link", lock_file("hard link", resume), 2, ("has other names",)),
     Case(
         "lock file a link out (reconstruct)",
         lock_file("link", reconstruct),
