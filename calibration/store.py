@@ -10,7 +10,8 @@ Layout (docs/architecture.md, Calibration store)::
 Spectra are stored at their measured sampling and resampled on read, so the store is
 independent of the grid. Adding a spectrum under an existing name creates the next version;
 old versions stay on disk and in the index until removed explicitly. The index is rewritten
-atomically (temporary file, fsync, rename).
+atomically (temporary file, fsync, rename); every change re-reads it under the store's lock
+(core.lock), so two commands adding entries at once keep both.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import os
 import re
 import shutil
 from collections.abc import Mapping
+from contextlib import AbstractContextManager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,6 +35,7 @@ from calibration import defaults
 from calibration.grid import DEFAULT_GRID, SpectralGrid
 from calibration.spectra import resample, validate_spectrum
 from core.errors import RigError
+from core.lock import locked
 from core.yamlio import load_yaml, yaml_problem
 
 FORMAT = "spectral-rig-calibration/1"
@@ -40,6 +43,8 @@ ENV_STORE = "SPECTRAL_RIG_STORE"
 INDEX = "index.yaml"
 KINDS: tuple[str, ...] = ("light", "camera")
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+\- /]*$")
+# A change holds the lock for milliseconds; a holder for longer is stuck or a whole init-store.
+STORE_WAIT_S = 30.0
 
 
 def value_columns(kind: str) -> list[str]:
@@ -271,7 +276,23 @@ class CalibrationStore:
         return resample(w, v, grid, source=f"{self.root / entry.file} ({name} v{entry.version})")
 
     # -- changes ---------------------------------------------------------------------------
+    def _changing(self, command: str) -> AbstractContextManager[None]:
+        """Hold the store's lock (waiting for another change to end) for a read-modify-write."""
+        return locked(self.root, command, wait_s=STORE_WAIT_S, create=True)
+
     def _add(
+        self,
+        name: str,
+        kind: str,
+        wavelengths: np.ndarray,
+        values: np.ndarray,
+        provenance: Mapping[str, Any],
+    ) -> Entry:
+        with self._changing("rig calibrate import"):
+            self._entries = self._read_index()  # another command may have added since
+            return self._add_unlocked(name, kind, wavelengths, values, provenance)
+
+    def _add_unlocked(
         self,
         name: str,
         kind: str,
@@ -337,12 +358,16 @@ class CalibrationStore:
 
     def remove(self, name: str, version: int | None = None) -> list[Entry]:
         """Remove one version (or every version) of ``name`` and its files."""
-        self.entry(name, version)
-        gone = [
-            e for e in self._entries if e.name == name and (version is None or e.version == version)
-        ]
-        self._entries = [e for e in self._entries if e not in gone]
-        self._write_index()
+        with self._changing("rig calibrate remove"):
+            self._entries = self._read_index()
+            self.entry(name, version)
+            gone = [
+                e
+                for e in self._entries
+                if e.name == name and (version is None or e.version == version)
+            ]
+            self._entries = [e for e in self._entries if e not in gone]
+            self._write_index()
         for e in gone:
             (self.root / e.file).unlink(missing_ok=True)
         return gone
@@ -377,10 +402,17 @@ class CalibrationStore:
     ) -> CalibrationStore:
         """A store holding the built-in defaults, each with its source in the provenance."""
         store = cls(root)
-        if store._entries:
-            raise RigError(
-                f"{store.root} already holds a calibration store", "choose an empty directory"
-            )
+        with store._changing("rig calibrate init-store"):
+            store._entries = store._read_index()
+            if store._entries:
+                raise RigError(
+                    f"{store.root} already holds a calibration store", "choose an empty directory"
+                )
+            store._add_defaults(grid)
+        return store
+
+    def _add_defaults(self, grid: SpectralGrid) -> None:
+        """The built-in camera sensitivities, bulb channel models and their mixes."""
         today = _dt.date.today().isoformat()
         for cam in defaults.camera_names():
             w, rgb = defaults.camera_sensitivity_native(cam)
@@ -391,10 +423,10 @@ class CalibrationStore:
                     f"; extended to {grid.start_nm:g}–{grid.stop_nm:g} nm (constant extrapolation)"
                 )
             source = defaults.camera_source_description(cam)
-            store.add_camera(cam, w, rgb, {"source": source, "date": today, "notes": notes})
+            self.add_camera(cam, w, rgb, {"source": source, "date": today, "notes": notes})
         channels = defaults.rgbcw_channel_spds(grid)
         for key, spd in channels.items():
-            store.add_light(
+            self.add_light(
                 f"bulb/{key}",
                 grid.wavelengths,
                 spd,
@@ -407,7 +439,7 @@ class CalibrationStore:
                 },
             )
         for name, levels in defaults.default_illuminations().items():
-            store.add_light(
+            self.add_light(
                 name,
                 grid.wavelengths,
                 defaults.illumination_spd(levels, channels),
@@ -418,4 +450,3 @@ class CalibrationStore:
                     "notes": "MODEL",
                 },
             )
-        return store

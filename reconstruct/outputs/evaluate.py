@@ -16,6 +16,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from core.errors import RigError
+from core.lock import output_lock
 from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.model.raycast import RayCaster
 from reconstruct.model.render import render_image
@@ -143,8 +144,21 @@ def evaluate(
     gt_light_offset: np.ndarray | None = None,
     out_dir: Path | None = None,
 ) -> Evaluation:
-    """Compare a reconstruction (``recon`` folder or its ``reflectance.npz``) with the truth."""
+    """Compare a reconstruction (``recon`` folder or its ``reflectance.npz``) with the truth;
+    the session written into stays locked (core.lock) meanwhile."""
     recon = Path(recon)
+    out = Path(out_dir) if out_dir else (recon if recon.is_dir() else recon.parent)
+    with output_lock(out, "rig evaluate"):
+        return _evaluate(recon, gt_mesh, gt_reflectance, gt_light_offset, out)
+
+
+def _evaluate(
+    recon: Path,
+    gt_mesh: Path,
+    gt_reflectance: Path,
+    gt_light_offset: np.ndarray | None,
+    out: Path,
+) -> Evaluation:
     npz_path = recon / export.REFLECTANCE_FILE if recon.is_dir() else recon
     data = export.read_reflectance_npz(npz_path)
     X = np.asarray(data["vertices"], dtype=float)
@@ -191,7 +205,6 @@ def evaluate(
         ev.light_offset_error_m = float(
             np.linalg.norm(np.asarray(offset) - np.asarray(gt_light_offset))
         )
-    out = Path(out_dir) if out_dir else (recon if recon.is_dir() else recon.parent)
     vmax = float(np.percentile(rmse[observed], 95)) if observed.any() else float(rmse.max())
     files = [
         error_map(out / ERROR_MAP, X, faces, np.where(observed, rmse, np.nan), vmax),

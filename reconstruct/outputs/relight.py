@@ -23,6 +23,7 @@ from calibration.importers import read_spectrum
 from calibration.spectra import resample
 from core.config import bounded, from_mapping
 from core.errors import RigError
+from core.lock import output_lock
 from core.yamlio import read_yaml
 from reconstruct.model.camera import Intrinsics, Pose, read_colmap_text
 from reconstruct.model.raycast import RayCaster
@@ -65,9 +66,11 @@ def encode_srgb(linear: np.ndarray) -> np.ndarray:
 
 
 def write_png(path: Path, rgb8: np.ndarray) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), cv2.cvtColor(rgb8, cv2.COLOR_RGB2BGR)):
-        raise RigError(f"cannot write {path}", "check the folder exists and is writable")
+    """Write a relit image; into a session only while no other command writes it."""
+    with output_lock(path, "rig relight"):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if not cv2.imwrite(str(path), cv2.cvtColor(rgb8, cv2.COLOR_RGB2BGR)):
+            raise RigError(f"cannot write {path}", "check the folder exists and is writable")
     return path
 
 

@@ -21,8 +21,9 @@ from typing import Any, TextIO
 
 from rich.console import Console
 
+from core.lock import locked
 from core.session import RECON_DIR, Session
-from reconstruct.run.pipeline import Reconstruction, run_reconstruction
+from reconstruct.run.pipeline import RECONSTRUCT, Reconstruction, run_reconstruction
 from reconstruct.run.progress import IterationProgress
 from reconstruct.stages.resumable import LOG_FILE, attach_log_file
 
@@ -96,6 +97,7 @@ def run_logged(
     logged when ``terminal`` is false); ``session`` opened by the caller, or its folder."""
     session = Session.of(session)  # a missing session fails before recon/ is made
     with (
+        locked(session.root, RECONSTRUCT),  # before recon/log.txt is touched
         captured_output(session.root / RECON_DIR, native=verbosity >= 2, terminal=terminal),
         IterationProgress.for_config(config, console, show=terminal) as iterations,
     ):

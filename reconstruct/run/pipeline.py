@@ -29,6 +29,7 @@ from calibration.grid import DEFAULT_GRID
 from calibration.store import CalibrationStore
 from core.errors import RigError
 from core.labels import AMBIENT
+from core.lock import locked
 from core.session import Session
 from core.yamlio import read_yaml
 from reconstruct.frames.ambient import exposure_ratio, subtract_ambient
@@ -54,6 +55,7 @@ from reconstruct.stages.resumable import Timings, timed_run
 log = logging.getLogger("reconstruct")
 FRONT_SECTIONS = ("decode", "poses", "mesh", "procam", "visibility", "subdivide")
 Progress = Callable[[str, IterationRecord], None]
+RECONSTRUCT = "rig reconstruct"  # what a refused command is told holds the session
 
 
 @dataclass
@@ -387,12 +389,17 @@ def run_reconstruction(
     basis: SpectralBasis | None = None,
 ) -> Reconstruction:
     """Both halves of the pipeline on a session (opened by the caller, or its folder; opened
-    once either way); outputs in ``SESSION/recon/``."""
+    once either way); outputs in ``SESSION/recon/``. The session is locked (core.lock) for
+    the whole run."""
     conf = dict(config or {})
     opt_conf = conf.pop("optimise", None)
     settings = OptimiseSettings.from_mapping(opt_conf, "config optimise")
     session = Session.of(session)
-    with tracked(session.recon_dir) as status, timed_run(session.recon_dir) as timings:
+    with (
+        locked(session.root, RECONSTRUCT),
+        tracked(session.recon_dir) as status,
+        timed_run(session.recon_dir) as timings,
+    ):
         rec = _run(session, conf, opt_conf, settings, initial_mesh, progress, basis, status,
                    timings)
         if rec.report["skipped_frames"]:

@@ -11,6 +11,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from core.errors import RigError
+from core.lock import locked
 from core.manifest import FrameRecord
 from core.session import POSES_DIR, SESSION_FILE
 from core.session_info import PlanInfo, SessionInfo
@@ -60,8 +61,40 @@ def run_capture(
     session.yaml (object, operator, conditions); ``trust_devices`` lets a resume open
     devices whose snapshot runs a program without asking (rig.capture.trust). Raises
     :class:`CaptureStopped` when the person stops, RigError on any failure — in both cases
-    every completed frame is on disk and ``resume=True`` continues where it stopped."""
+    every completed frame is on disk and ``resume=True`` continues where it stopped. The
+    session folder is locked (core.lock) for the whole call: a second capture, a resume or a
+    reconstruction of it meanwhile is refused."""
     out = Path(out_dir).expanduser().resolve()
+    with locked(out, "rig capture --resume" if resume else "rig capture", create=True):
+        return _capture(
+            profile,
+            out,
+            yes=yes,
+            resume=resume,
+            seed=seed,
+            console=console,
+            ask=ask,
+            open_rig=open_rig,
+            on_frame=on_frame,
+            notes=notes,
+            trust_devices=trust_devices,
+        )
+
+
+def _capture(
+    profile: Profile | str | Path | None,
+    out: Path,
+    *,
+    yes: bool,
+    resume: bool,
+    seed: int | None,
+    console: Console | None,
+    ask: Ask | None,
+    open_rig: DeviceFactory,
+    on_frame: Callable[[FrameRecord], None] | None,
+    notes: str,
+    trust_devices: bool,
+) -> Path:
     console = console or Console(stderr=True)
     interactive = ask is not None or stdin_is_tty()
     if not yes and ask is None:
@@ -164,13 +197,13 @@ def _start_session(
     projector_size: tuple[int, int] | None,
 ) -> dict[str, Any]:
     """Create the session directory; if setting it up fails (a missing calibration entry...),
-    remove it again so the same --out can be used once the problem is fixed."""
+    empty it again so the same --out can be used once the problem is fixed (the lock removes
+    a folder it made)."""
     new_session_dir(out)
     try:
         return _new_info(out, profile, devices, seed, n_frames, projector_size)
     except BaseException:
         discard_unstarted_session(out)
-        out.rmdir()
         raise
 
 

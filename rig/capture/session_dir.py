@@ -15,6 +15,7 @@ import yaml
 
 from core.errors import RigError
 from core.files import write_bytes_atomically
+from core.lock import LOCK_FILE
 from core.manifest import MANIFEST_FILE
 from core.session import CALIBRATION_DIR, POSES_DIR, RAW_DIR, SESSION_FILE
 from core.yamlio import load_yaml
@@ -80,8 +81,9 @@ def snapshot_profile(session_dir: Path) -> Profile:
 
 
 def check_new_session_dir(out_dir: Path) -> None:
-    """``out_dir`` must be new or empty (checked before any device is opened)."""
-    if out_dir.exists() and any(out_dir.iterdir()):
+    """``out_dir`` must be new or empty but for its lock (checked before any device is
+    opened)."""
+    if out_dir.exists() and any(p.name != LOCK_FILE for p in out_dir.iterdir()):
         if (out_dir / SESSION_FILE).exists():
             raise RigError(
                 f"{out_dir} already holds a capture session",
@@ -102,6 +104,7 @@ def discard_unstarted_session(out_dir: Path) -> None:
         POSES_DIR,
         MANIFEST_FILE,
         f".{SESSION_FILE}.tmp",
+        LOCK_FILE,
     }
     foreign = sorted(p.name for p in out_dir.iterdir() if p.name not in leftovers)
     manifest = out_dir / MANIFEST_FILE
@@ -122,7 +125,8 @@ def discard_unstarted_session(out_dir: Path) -> None:
             "and start a new session",
         )
     for path in out_dir.iterdir():
-        shutil.rmtree(path) if path.is_dir() else path.unlink()
+        if path.name != LOCK_FILE:  # held by this capture
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
 
 
 def new_session_dir(out_dir: Path) -> None:

@@ -36,7 +36,7 @@ def handle(args: argparse.Namespace) -> int:
     from calibration.grid import SpectralGrid
     from rig.view.colour import illuminant_matrices
     from rig.view.data import load_view_data
-    from rig.view.page import build_page
+    from rig.view.page import build_page, export_page
     from rig.view.serve import serve
 
     console = Console(stderr=True)
@@ -48,8 +48,7 @@ def handle(args: argparse.Namespace) -> int:
     grid = SpectralGrid.from_wavelengths(data.wavelengths_nm)
     page = build_page(data, illuminant_matrices(args.illuminant or list(DEFAULT_ILLUMINANTS), grid))
     if args.export is not None:
-        args.export.parent.mkdir(parents=True, exist_ok=True)
-        args.export.write_text(page, encoding="utf-8")
+        export_page(args.export, page)
         console.print(f"wrote {args.export} ({len(page) / 1e6:.1f} MB, works offline)")
         return 0
     serve(page, args.port, not args.no_browser,

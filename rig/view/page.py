@@ -8,11 +8,14 @@ from __future__ import annotations
 import base64
 import json
 from importlib.resources import files
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from plotly.offline import get_plotlyjs
 
+from core.files import write_bytes_atomically
+from core.lock import output_lock
 from rig.view.data import ViewData
 
 
@@ -50,3 +53,11 @@ def build_page(data: ViewData, matrices: dict[str, np.ndarray]) -> str:
         .replace("__PLOTLY__", get_plotlyjs())
         .replace("__DATA__", body)
     )
+
+
+def export_page(path: Path, page: str) -> None:
+    """Write the page to ``path`` (whole or not at all); into a session only while no other
+    command writes it."""
+    with output_lock(path, "rig view --export"):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_bytes_atomically(path, page.encode("utf-8"))

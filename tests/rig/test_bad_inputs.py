@@ -7,11 +7,12 @@ from __future__ import annotations
 
 import re
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from lockholder import hold, release_all
 
 from rig.cli import build_parser, main
 
@@ -208,6 +209,26 @@ SESSIONS = [
 ]
 
 
+def held_session(tmp: Path) -> list[str]:
+    session = write(tmp / "s" / "session.yaml", "format: 1\n").parent
+    hold(session, "rig capture")
+    return ["reconstruct", str(session)]
+
+
+def session_with_lock_folder(tmp: Path) -> list[str]:
+    session = write(tmp / "s" / "session.yaml", "format: 1\n").parent
+    (session / ".lock").mkdir()
+    return ["reconstruct", str(session)]
+
+
+SESSIONS += [
+    Case("session-in-use", held_session,
+         r"s is in use by `rig capture` \(PID \d+ on .+, since \S+Z\) — wait for it to finish"),
+    Case("session-lock-a-folder", session_with_lock_folder,
+         r"cannot open the lock file .*s/\.lock .*remove"),
+]
+
+
 # -- rig board -----------------------------------------------------------------------------------
 def board(*args: str) -> Callable[[Path], list[str]]:
     def make(tmp: Path) -> list[str]:
@@ -359,6 +380,12 @@ def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, s
         code = int(exit_.code or 0)
     out = capsys.readouterr()
     return code, out.out + out.err
+
+
+@pytest.fixture(autouse=True)
+def _end_lock_holders() -> Iterator[None]:
+    yield
+    release_all()
 
 
 def test_the_table_is_large_enough() -> None:

@@ -8,14 +8,16 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import subprocess
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+from lockholder import hold, release_all
 from simrig import PROFILE
 
 from calibration.store import CalibrationStore
@@ -280,6 +282,84 @@ def resume_folder(what: str) -> Prepare:
     return prepare
 
 
+def held_by(command: str, argv: Callable[[Path], list[str]]) -> Prepare:
+    """The session locked by another process running ``command``, then ``argv``."""
+
+    def prepare(session: Path, tmp: Path) -> list[str]:
+        hold(session, command)
+        return argv(session)
+
+    return prepare
+
+
+def lock_file(kind: str, argv: Callable[[Path], list[str]]) -> Prepare:
+    """SESSION/.lock left by a dead process, or replaced by a folder or a link out."""
+
+    def prepare(session: Path, tmp: Path) -> list[str]:
+        lock = session / ".lock"
+        if kind == "dead":
+            gone = subprocess.Popen(["true"])
+            gone.wait()
+            record = {"pid": gone.pid, "host": "here", "command": "rig capture", "since": "x"}
+            lock.write_text(json.dumps(record))
+        elif kind == "folder":
+            lock.mkdir()
+        elif kind == "hard link":  # writing the holder into it would change the victim
+            (tmp / "victim.csv").write_text("precious")
+            os.link(tmp / "victim.csv", lock)
+        else:
+            (tmp / "victim.csv").write_text("precious")
+            lock.symlink_to(tmp / "victim.csv")
+        return argv(session)
+
+    return prepare
+
+
+def resume(session: Path) -> list[str]:
+    return ["capture", "--resume", str(session), "--yes"]
+
+
+def reconstruct(session: Path) -> list[str]:
+    return ["reconstruct", str(session)]
+
+
+def new_capture(session: Path) -> list[str]:
+    return ["capture", "--yes", "--profile", str(PROFILE), "--out", str(session)]
+
+
+IN_USE = "wait for it to finish, or stop it"
+LOCK_CASES = [
+    Case(
+        "resume while captured",
+        held_by("rig capture", resume),
+        2,
+        ("in use by `rig capture`", IN_USE),
+    ),
+    Case(
+        "reconstruct while captured",
+        held_by("rig capture --resume", reconstruct),
+        2,
+        ("in use by `rig capture --resume` (PID", IN_USE),
+    ),
+    Case(
+        "resume while reconstructed",
+        held_by("rig reconstruct", resume),
+        2,
+        ("in use by `rig reconstruct`", IN_USE),
+    ),
+    Case("new capture into a held folder", held_by("rig capture", new_capture), 2, (IN_USE,)),
+    Case("lock file of a dead process", lock_file("dead", resume), 0, ("capture complete",)),
+    Case("lock file a folder", lock_file("folder", resume), 2, ("cannot open the lock file",)),
+    Case("lock file a link out", lock_file("link", resume), 2, ("cannot open the lock file",)),
+    Case("lock file a hard link", lock_file("hard link", resume), 2, ("has other names",)),
+    Case(
+        "lock file a link out (reconstruct)",
+        lock_file("link", reconstruct),
+        2,
+        ("cannot open the lock file", ".lock"),
+    ),
+]
+
 SESSION_CASES = [
     Case("session.yaml binary", resume_after(binary_session_yaml), 2, ("session.yaml",)),
     Case(
@@ -475,7 +555,13 @@ DEVICE_CASES = [
     ),
 ]
 
-CASES = MANIFEST_CASES + SESSION_CASES + STORE_CASES + DEVICE_CASES
+CASES = MANIFEST_CASES + SESSION_CASES + LOCK_CASES + STORE_CASES + DEVICE_CASES
+
+
+@pytest.fixture(autouse=True)
+def _end_lock_holders() -> Iterator[None]:
+    yield
+    release_all()
 
 
 def test_the_table_is_large_enough() -> None:
