@@ -64,8 +64,10 @@ def illuminant(
     elif Path(spec).suffix:  # a file name (CIE names have none)
         path = Path(spec)
         if not path.is_file():
-            raise RigError(f"illuminant file {path} does not exist",
-                           "give a CIE name (D65, A, FL2 …) or an SPD CSV wavelength_nm,power")
+            raise RigError(
+                f"illuminant file {path} does not exist",
+                "give a CIE name (D65, A, FL2 …) or an SPD CSV wavelength_nm,power",
+            )
         sp = read_spectrum(path)
         spd = resample(sp.wavelengths_nm, sp.column(None, "light"), grid, source=str(path))
         label = name or path.stem
