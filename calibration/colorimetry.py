@@ -10,6 +10,8 @@ illuminant's white to D65 with CAT02 and encodes with the sRGB transfer function
 
 from __future__ import annotations
 
+import functools
+
 import colour
 import numpy as np
 
@@ -32,15 +34,22 @@ def xyz_weights(
             f"illuminant SPD has shape {spd.shape} (or no power), grid needs ({grid.size},)",
             "give a CIE illuminant name (e.g. D65) or an SPD resampled onto the grid",
         )
+    return _weights(grid, tuple(float(v) for v in spd))
+
+
+@functools.lru_cache(maxsize=64)
+def _weights(grid: SpectralGrid, spd: tuple[float, ...]) -> np.ndarray:
+    """:func:`xyz_weights` computed once per grid and SPD (read-only)."""
     shape = colour.SpectralShape(grid.start_nm, grid.stop_nm, grid.step_nm)
     sd = colour.SpectralDistribution(dict(zip(grid.wavelengths, spd, strict=True)))
-    # XYZ of each unit-impulse reflectance: the rows of the linear map (colour scales Y to 100)
     cmfs = colour.MSDS_CMFS[CMFS].copy().align(shape)  # sampled on the grid, as the spectra
+    # XYZ of each unit-impulse reflectance: the rows of the linear map (colour scales Y to 100)
     rows = colour.msds_to_XYZ(
-        np.eye(grid.size), cmfs=cmfs, illuminant=sd,
-        method="Integration", shape=shape,
-    )  # fmt: skip
-    return np.asarray(rows, dtype=float) / 100.0
+        np.eye(grid.size), cmfs=cmfs, illuminant=sd, method="Integration", shape=shape
+    )
+    weights = np.asarray(rows, dtype=float) / 100.0
+    weights.setflags(write=False)
+    return weights
 
 
 def reflectance_to_xyz(
