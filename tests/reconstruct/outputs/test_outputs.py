@@ -255,3 +255,34 @@ def test_evaluate_reports_ciede2000_per_vertex_and_per_patch(
         assert 0.5 < c["per_vertex"]["mean"] < 10
         assert [p["name"] for p in c["patches"]] == ["dark skin", "light skin"]
         assert c["patch_max"] >= c["patch_mean"] > 0.5
+
+
+def test_evaluate_a_sim_truth_names_its_colorchecker_patches(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from drivers.sim.rig import SimRig
+
+    gt = tmp_path / "session" / "ground_truth"
+    SimRig({"views": 4, "subdivisions": 3}, seed=0).write_ground_truth(gt)
+    mesh = trimesh.load(gt / "mesh.ply", process=False)
+    truth = np.load(gt / "reflectance.npy")
+    n = len(mesh.vertices)
+    estimate = truth.copy()
+    estimate[np.load(gt / "patch.npy") == 0] *= 1.25  # "dark skin" read too bright
+    recon = tmp_path / "session" / "recon"
+    recon.mkdir()
+    wl = np.arange(400.0, 701.0, 10.0)
+    export.write_reflectance_npz(
+        recon / export.REFLECTANCE_FILE, np.asarray(mesh.vertices), np.asarray(mesh.faces),
+        np.asarray(mesh.vertex_normals), wl, estimate, np.zeros((n, 8)), np.zeros((31, 8)),
+        np.ones(n, bool),
+    )  # fmt: skip
+    args = ["evaluate", str(tmp_path / "session"), "--gt-mesh", str(gt / "mesh.ply"),
+            "--gt-reflectance", str(gt / "reflectance.npy")]  # fmt: skip
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    assert "dark skin" in printed and "ΔE00 A per patch (24)" in printed
+    colour = json.loads((recon / "evaluation.json").read_text())["colour"]
+    d65 = {p["name"]: p["delta_e00"] for p in colour[0]["patches"]}
+    assert d65["dark skin"] > 1.0 and colour[0]["patch_max"] == d65["dark skin"]
+    assert max(v for k, v in d65.items() if k != "dark skin") < 1e-6
