@@ -20,6 +20,8 @@ import scipy
 from rich.console import Console
 from rich.table import Table
 
+from calibration.colour_difference import DEFAULT_ILLUMINANTS
+
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_OUT = REPO / "bench" / "results"
 WORKER_TAG = "BENCH-RESULT "  # a worker's last stdout line: this tag + JSON
@@ -130,7 +132,7 @@ def fmt(value: object, digits: int = 4) -> str:
     return str(value)
 
 
-COLOUR_ILLUMINANTS = ("D65", "A")
+COLOUR_ILLUMINANTS = DEFAULT_ILLUMINANTS  # the illuminants every evaluation reports
 COLOUR_COLUMNS = [
     f"ΔE00 {n} {what}" for n in COLOUR_ILLUMINANTS
     for what in ("vertex mean / median / p90", "patch mean / max")
