@@ -20,6 +20,8 @@ import scipy
 from rich.console import Console
 from rich.table import Table
 
+from calibration.colour_difference import DEFAULT_ILLUMINANTS
+
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_OUT = REPO / "bench" / "results"
 WORKER_TAG = "BENCH-RESULT "  # a worker's last stdout line: this tag + JSON
@@ -128,6 +130,41 @@ def fmt(value: object, digits: int = 4) -> str:
             return "-" if np.isnan(v) else str(v)
         return f"{v:.{digits}g}"
     return str(value)
+
+
+COLOUR_ILLUMINANTS = DEFAULT_ILLUMINANTS  # the illuminants every evaluation reports
+COLOUR_COLUMNS = [
+    f"ΔE00 {n} {what}" for n in COLOUR_ILLUMINANTS
+    for what in ("vertex mean / median / p90", "patch mean / max")
+]  # fmt: skip
+
+
+def colour_cells(colour: Sequence[dict[str, Any]]) -> list[str]:
+    """The :data:`COLOUR_COLUMNS` cells of an evaluation's ``colour`` list
+    (:meth:`calibration.colour_difference.ColourReport.as_dict` per illuminant)."""
+    by_name = {c["illuminant"]: c for c in colour}
+    cells = []
+    for name in COLOUR_ILLUMINANTS:
+        c = by_name.get(name)
+        if c is None:
+            cells += ["-", "-"]
+            continue
+        v = c["per_vertex"]
+        cells.append(f"{v['mean']:.2f} / {v['median']:.2f} / {v['p90']:.2f}")
+        patch = c["patch_mean"] is not None
+        cells.append(f"{c['patch_mean']:.2f} / {c['patch_max']:.2f}" if patch else "-")
+    return cells
+
+
+def information_floor(session: Path) -> dict[str, Any]:
+    """The information floor of a sim or external session's illuminations and camera
+    (:func:`reconstruct.outputs.evaluate.information_floor` on its ground truth)."""
+    from core.session import Session
+    from reconstruct.outputs.evaluate import information_floor as floor
+    from reconstruct.run.pipeline import session_responses
+
+    responses = session_responses(Session.open(session))
+    return floor(session / "ground_truth" / "reflectance.npy", responses)
 
 
 def report(

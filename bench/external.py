@@ -8,8 +8,10 @@ initial mesh) and scored against the truth and against a per-vertex least-square
     python -m bench.external --size medium --scenes spot-stepped
 
 Per scene: initial and final accuracy/completeness (mean, median, p90), spectral RMSE (mean,
-median, per ColorChecker patch), the oracle's RMSE, light offset error, time per stage, peak
-RSS; error maps (PNG) beside the tables in ``--out``.
+median, per ColorChecker patch), CIEDE2000 under D65 and A (per vertex mean/median/p90, per
+patch mean/max), the same for the per-vertex oracle and for the information floor (the 2-D
+estimator given the true shading, no noise), light offset error, time per stage, peak RSS;
+error maps (PNG) beside the tables in ``--out``.
 """
 
 from __future__ import annotations
@@ -24,7 +26,17 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from bench._common import DEFAULT_OUT, ResultTable, fmt, machine_info, peak_rss_mb, report
+from bench._common import (
+    COLOUR_COLUMNS,
+    DEFAULT_OUT,
+    ResultTable,
+    colour_cells,
+    fmt,
+    information_floor,
+    machine_info,
+    peak_rss_mb,
+    report,
+)
 from bench.external_scene import DATA, SceneSpec
 from bench.external_session import Size, build_session
 from calibration.defaults import colorchecker_reflectances
@@ -164,6 +176,9 @@ def run_scene(
         "rmse_per_patch": per_patch_rmse(rec.reflectance_path, final_dir, truth),
         "oracle_rmse_mean": oracle["rmse_mean"],
         "oracle_rmse_median": oracle["rmse_median"],
+        "colour": final["colour"],
+        "oracle_colour": oracle["colour"],
+        "floor": information_floor(session),
         "light_offset_error_m": final["light_offset_error_m"],
         "peak_rss_mb": peak_rss_mb(),
         "error_maps": [str(p) for p in sorted(folder.rglob("*error_map.png"))],
@@ -194,6 +209,10 @@ def tables(results: list[dict[str, Any]]) -> list[ResultTable]:
         ["scene", "RMSE mean", "RMSE median", "oracle RMSE mean", "worst patch (RMSE)",
          "light offset error (mm)"],
     )  # fmt: skip
+    colour = ResultTable(
+        "Colour: spectral RMSE and CIEDE2000 (CIE 1931 2°) against the truth",
+        ["scene", "method", "RMSE mean", *COLOUR_COLUMNS],
+    )
     cost = ResultTable("Cost", ["scene", "render (s)", "stages (s)", "peak RSS (MB)"])
     for r in results:
         i, f = r["initial"], r["final"]
@@ -211,9 +230,14 @@ def tables(results: list[dict[str, Any]]) -> list[ResultTable]:
             r["scene"], fmt(r["rmse_mean"]), fmt(r["rmse_median"]), fmt(r["oracle_rmse_mean"]),
             f"{name} ({worst[1]:.3f})", _mm(r["light_offset_error_m"]),
         )  # fmt: skip
+        colour.add(r["scene"], "reconstruction", fmt(r["rmse_mean"]), *colour_cells(r["colour"]))
+        colour.add(r["scene"], "oracle (true shape and light, per vertex)",
+                   fmt(r["oracle_rmse_mean"]), *colour_cells(r["oracle_colour"]))  # fmt: skip
+        colour.add(r["scene"], "information floor (2-D, true shading, no noise)",
+                   fmt(r["floor"]["rmse_mean"]), *colour_cells(r["floor"]["colour"]))  # fmt: skip
         stages = ", ".join(f"{k} {v:.0f}" for k, v in r["timings_s"].items())
         cost.add(r["scene"], f"{r['render_s']:.0f}", stages, f"{r['peak_rss_mb']:.0f}")
-    return [shape, spectral, cost]
+    return [shape, spectral, colour, cost]
 
 
 def main(argv: list[str] | None = None) -> int:

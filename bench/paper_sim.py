@@ -12,7 +12,12 @@ point noise and a smooth wave, re-meshed by Poisson), then
   its projections in all visible views;
 * (b) the full joint method: ``rig reconstruct`` (``run_reconstruction``) from the same mesh;
 * oracle: true shape and true light positions, reflectance per vertex by least squares from the
-  same images (shadows and shading known) — the best the data allows.
+  same images (shadows and shading known);
+* information floor: the 2-D estimator on noise-free responses of each true reflectance under
+  the session's illuminations and camera (shading known) — the physical limit of the data.
+
+Each method is scored by spectral RMSE and CIEDE2000 under D65 and A (per vertex and per
+ColorChecker patch).
 
 Each runs in its own interpreter (its own peak RSS) and is scored by
 ``reconstruct.outputs.evaluate``.
@@ -36,9 +41,12 @@ import yaml
 from rich.console import Console
 
 from bench._common import (
+    COLOUR_COLUMNS,
     DEFAULT_OUT,
     ResultTable,
+    colour_cells,
     emit_worker_result,
+    information_floor,
     machine_info,
     make_console,
     report,
@@ -154,6 +162,7 @@ def _score(
         "completeness_m": ev.completeness_m,
         "rmse_mean": ev.spectral_rmse,
         "rmse_median": float(np.median(rmse[observed.astype(bool)])),
+        "colour": ev.colour,
         "light_offset_error_m": ev.light_offset_error_m,
         "light_position_error_m": light_err,
         "vertices": ev.vertices,
@@ -443,6 +452,7 @@ def main(argv: list[str] | None = None) -> int:
         "completeness",
         "spectral RMSE mean",
         "spectral RMSE median",
+        *COLOUR_COLUMNS,
         "light position error",
         "time",
         "peak RSS",
@@ -516,10 +526,18 @@ def main(argv: list[str] | None = None) -> int:
                 "0 (truth)" if oracle else _mm(r["completeness_m"]),
                 f"{r['rmse_mean']:.4f}",
                 f"{r['rmse_median']:.4f}",
+                *colour_cells(r["colour"]),
                 _mm(r["light_position_error_m"]) if mode != "baseline" else "-",
                 f"{r['seconds']:.1f} s",
                 f"{r['peak_rss_mb'] / 1024:.2f} GB",
             )
+        floor = information_floor(session)
+        scene_runs["floor"] = floor
+        table.add(
+            scene, "information floor: 2-D estimator, true shading, no noise", "-", "-", "-",
+            f"{floor['rmse_mean']:.4f}", f"{floor['rmse_median']:.4f}",
+            *colour_cells(floor["colour"]), "-", "-", "-",
+        )  # fmt: skip
         runs[scene] = scene_runs
         for mode in ("joint", "baseline", "oracle"):
             for png in (folder / mode).glob("*.png"):
@@ -529,6 +547,9 @@ def main(argv: list[str] | None = None) -> int:
         "vertices → reconstructed surface (reconstruct.outputs.evaluate)",
         "spectral RMSE: per vertex over 400–700 nm against the true reflectance at the closest "
         "true surface point, over observed vertices",
+        "ΔE00: CIEDE2000 (CIE 1931 2°) under D65 and A, per vertex over observed vertices and "
+        "per ColorChecker patch (the patch's median spectrum); information floor: the 2-D "
+        "estimator given the true shading on noise-free responses of the true reflectance",
         "light position error: mean over views of |p_c − p_c,true| (the joint method's light "
         "comes from the plate offset, started at 0)",
         "time: each method from decoded inputs (cached front stages) to its scores; the joint "

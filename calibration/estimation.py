@@ -151,3 +151,16 @@ def _estimate_weighted(
         sol[~ok] = np.nan
         alpha[sl] = sol
     return alpha
+
+
+def noise_free_estimate(
+    reflectance: np.ndarray,
+    responses: np.ndarray,
+    basis: SpectralBasis,
+    smoothness: float = DEFAULT_SMOOTHNESS,
+) -> np.ndarray:
+    """The estimator's answer (P, N_λ) for reflectances (P, N_λ) seen with unit, known shading
+    and no noise: the information floor of the illuminations and camera in ``responses``."""
+    r = np.asarray(reflectance, dtype=float)
+    rgb = np.einsum("kcl,pl->pkc", np.asarray(responses, dtype=float), r)
+    return estimate_reflectance(rgb, responses, basis, smoothness)[1]

@@ -2,19 +2,33 @@
 from the reconstructed vertices to the true surface) and completeness (mean distance from the
 true vertices to the reconstructed surface), spectral RMSE per vertex against the true
 reflectance at the closest true surface point (barycentric interpolation of the true per-vertex
-spectra), and the error of the light offset."""
+spectra), CIEDE2000 under D65, A and any illuminant asked for (per vertex, and per patch where
+the truth labels patches: ``patch.npy`` beside the true reflectance), and the error of the
+light offset."""
 
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
+from calibration.basis import default_basis
+from calibration.colour_difference import (
+    DEFAULT_ILLUMINANTS,
+    ColourReport,
+    Illuminant,
+    colour_report,
+    illuminant,
+)
+from calibration.defaults import colorchecker_reflectances
+from calibration.estimation import noise_free_estimate
 from core.errors import RigError
 from core.lock import output_lock
 from reconstruct.model.camera import Intrinsics, Pose
@@ -25,6 +39,7 @@ from reconstruct.outputs.relight import encode_srgb
 from reconstruct.stages import publish
 
 EVALUATION_FILE, RMSE_FILE, ERROR_MAP, ERROR_HIST = publish.EVALUATION
+PATCH_FILE = "patch.npy"  # beside the true reflectance: patch label per true vertex (-1 = none)
 
 
 @dataclass
@@ -37,6 +52,7 @@ class Evaluation:
     vertices: int
     light_offset_error_m: float | None = None
     light_offset_m: list[float] | None = None
+    colour: list[dict[str, Any]] = field(default_factory=list)  # ColourReport.as_dict per light
     files: list[str] = field(default_factory=list)
 
     def table(self) -> list[tuple[str, str]]:
@@ -49,9 +65,83 @@ class Evaluation:
             ),
             (f"spectral RMSE (all {self.vertices} vertices)", f"{self.spectral_rmse_all:.4f}"),
         ]
+        rows += colour_rows(self.colour)
         if self.light_offset_error_m is not None:
             rows.append(("light offset error", f"{self.light_offset_error_m * 1e3:.2f} mm"))
         return rows
+
+
+def colour_rows(reports: Sequence[dict[str, Any]]) -> list[tuple[str, str]]:
+    """Table rows of :meth:`ColourReport.as_dict` entries: ΔE00 per vertex and per patch."""
+    rows = []
+    for r in reports:
+        v = r["per_vertex"]
+        rows.append((f"ΔE00 {r['illuminant']} per vertex mean / median / p90",
+                     f"{v['mean']:.2f} / {v['median']:.2f} / {v['p90']:.2f}"))  # fmt: skip
+        if r["patches"]:
+            rows.append((f"ΔE00 {r['illuminant']} per patch ({len(r['patches'])}) mean / max",
+                         f"{r['patch_mean']:.2f} / {r['patch_max']:.2f}"))  # fmt: skip
+    return rows
+
+
+def patch_table(reports: Sequence[dict[str, Any]]) -> tuple[list[str], list[list[str]]]:
+    """Columns and rows of the per-patch table: one ΔE00 column per illuminant, then RMSE."""
+    if not reports or not reports[0]["patches"]:
+        return [], []
+    columns = ["patch", "vertices", *(f"ΔE00 {r['illuminant']}" for r in reports), "RMSE"]
+    rows = []
+    for k, p in enumerate(reports[0]["patches"]):
+        des = [f"{r['patches'][k]['delta_e00']:.2f}" for r in reports]
+        rows.append([p["name"], str(p["vertices"]), *des, f"{p['rmse']:.4f}"])
+    return columns, rows
+
+
+def truth_patches(gt_reflectance: Path, n_true: int) -> np.ndarray | None:
+    """Patch label per true vertex from ``patch.npy`` beside the true reflectance (None when
+    the truth has no patches)."""
+    path = Path(gt_reflectance).parent / PATCH_FILE
+    if not path.is_file():
+        return None
+    labels = np.load(path, allow_pickle=False).astype(int)
+    if labels.shape != (n_true,):
+        raise RigError(
+            f"{path} has shape {labels.shape}, expected ({n_true},)",
+            "give one patch label per true vertex (-1 = none), or remove the file",
+        )
+    return labels if (labels >= 0).any() else None
+
+
+def colour_reports(
+    estimate: np.ndarray,
+    truth: np.ndarray,
+    observed: np.ndarray,
+    patch: np.ndarray | None,
+    lights: Sequence[Illuminant],
+) -> list[ColourReport]:
+    """ΔE00 per illuminant over the observed vertices (ColorChecker names for 24 patches)."""
+    names = colorchecker_reflectances()[0]
+    use = names if patch is not None and patch.max() < len(names) else None
+    return [colour_report(estimate, truth, light, observed, patch, use) for light in lights]
+
+
+def information_floor(
+    gt_reflectance: Path, responses: np.ndarray, illuminants: Sequence[Illuminant] | None = None
+) -> dict[str, Any]:
+    """The 2-D estimator given the true shading: each true reflectance estimated by
+    ``calibration.estimation`` from its noise-free responses (K, 3, N_λ) of the session's
+    illuminations and camera — the best the data allows — scored by RMSE and ΔE00 (per vertex
+    over all true vertices, per patch where ``patch.npy`` labels them)."""
+    truth = np.load(gt_reflectance, allow_pickle=False)
+    estimate = noise_free_estimate(truth, responses, default_basis())
+    rmse = np.sqrt(np.mean((estimate - truth) ** 2, axis=1))
+    patch = truth_patches(Path(gt_reflectance), len(truth))
+    lights = illuminants or [illuminant(n) for n in DEFAULT_ILLUMINANTS]
+    colour = colour_reports(estimate, truth, np.ones(len(truth), bool), patch, lights)
+    return {
+        "rmse_mean": float(rmse.mean()),
+        "rmse_median": float(np.median(rmse)),
+        "colour": [c.as_dict() for c in colour],
+    }
 
 
 def load_mesh(path: Path) -> trimesh.Trimesh:
@@ -106,6 +196,13 @@ def interpolate_at(
     return np.einsum("mk,mkl->ml", bary, values[np.asarray(mesh.faces)[tri]])
 
 
+def nearest_corner(mesh: trimesh.Trimesh, points: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """Index of the corner of triangle ``tri`` nearest each surface point (its label wins)."""
+    corners = np.asarray(mesh.faces)[tri]
+    d = np.linalg.norm(np.asarray(mesh.vertices)[corners] - points[:, None, :], axis=2)
+    return corners[np.arange(len(points)), np.argmin(d, axis=1)]
+
+
 def error_map(
     path: Path, vertices: np.ndarray, faces: np.ndarray, errors: np.ndarray, vmax: float
 ) -> Path:
@@ -143,13 +240,15 @@ def evaluate(
     gt_reflectance: Path,
     gt_light_offset: np.ndarray | None = None,
     out_dir: Path | None = None,
+    illuminants: Sequence[Illuminant] | None = None,
 ) -> Evaluation:
     """Compare a reconstruction (``recon`` folder or its ``reflectance.npz``) with the truth;
-    the session written into stays locked (core.lock) meanwhile."""
+    ΔE00 under ``illuminants`` (default D65 and A); the session written into stays locked
+    (core.lock) meanwhile."""
     recon = Path(recon)
     out = Path(out_dir) if out_dir else (recon if recon.is_dir() else recon.parent)
     with output_lock(out, "rig evaluate"):
-        return _evaluate(recon, gt_mesh, gt_reflectance, gt_light_offset, out)
+        return _evaluate(recon, gt_mesh, gt_reflectance, gt_light_offset, out, illuminants)
 
 
 def _evaluate(
@@ -158,6 +257,7 @@ def _evaluate(
     gt_reflectance: Path,
     gt_light_offset: np.ndarray | None,
     out: Path,
+    illuminants: Sequence[Illuminant] | None,
 ) -> Evaluation:
     npz_path = recon / export.REFLECTANCE_FILE if recon.is_dir() else recon
     data = export.read_reflectance_npz(npz_path)
@@ -183,6 +283,10 @@ def _evaluate(
     d_comp, _, _ = surface_distance(np.asarray(gt.vertices, dtype=float), recon_mesh)
     truth = interpolate_at(gt, gt_refl, closest, tri)
     rmse = np.sqrt(np.mean((refl - truth) ** 2, axis=1))
+    gt_patch = truth_patches(Path(gt_reflectance), len(gt.vertices))
+    patch = None if gt_patch is None else gt_patch[nearest_corner(gt, closest, tri)]
+    lights = illuminants or [illuminant(n) for n in DEFAULT_ILLUMINANTS]
+    colour = colour_reports(refl, truth, observed, patch, lights)
     ev = Evaluation(
         accuracy_m=float(np.mean(d_acc)),
         completeness_m=float(np.mean(d_comp)),
@@ -190,6 +294,7 @@ def _evaluate(
         spectral_rmse_all=float(np.mean(rmse)),
         observed_vertices=int(observed.sum()),
         vertices=len(X),
+        colour=[c.as_dict() for c in colour],
     )
     report_path = (recon if recon.is_dir() else recon.parent) / export.REPORT_FILE
     if gt_light_offset is not None:

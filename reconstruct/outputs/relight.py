@@ -18,9 +18,8 @@ import cv2
 import numpy as np
 
 from calibration.colorimetry import xyz_weights
+from calibration.colour_difference import illuminant
 from calibration.grid import SpectralGrid
-from calibration.importers import read_spectrum
-from calibration.spectra import resample
 from core.config import bounded, from_mapping
 from core.errors import RigError
 from core.lock import output_lock
@@ -41,15 +40,7 @@ class Camera:
 def illuminant_spd(spec: str, grid: SpectralGrid) -> np.ndarray:
     """A CIE illuminant by name (D65, A, FL2, LED-B3, …) or an SPD file on ``grid``: a CSV
     ``wavelength_nm,power`` or any format `rig calibrate import` reads (OceanView, SpectraWiz)."""
-    path = Path(spec)
-    if path.suffix:  # a file name (CIE names have none); a missing file is a clear error
-        spectrum = read_spectrum(path)
-        return resample(
-            spectrum.wavelengths_nm, spectrum.column(None, "light"), grid, source=str(path)
-        )
-    from calibration.defaults import cie_illuminant
-
-    return cie_illuminant(spec, grid)
+    return illuminant(spec, grid).spd
 
 
 def srgb_response(spd: np.ndarray, grid: SpectralGrid) -> np.ndarray:

@@ -155,6 +155,14 @@ def lit_frame(front: FrontResult, key: tuple[int, str]) -> tuple[np.ndarray, np.
     return out.image, ~out.valid, out.weight
 
 
+def session_responses(session: Session) -> np.ndarray:
+    """Response matrices (K, 3, N_λ) of the session's planned illuminations, in plan order
+    sorted by name (as the optimiser stacks them)."""
+    names = sorted(session.info.plan.illuminations or [])
+    camera, spds = session_spectra(session, names)
+    return np.stack([response_matrix(camera, spds[n]) for n in names])
+
+
 def optimiser_input(front: FrontResult, session: Session, basis: SpectralBasis) -> OptimiseInput:
     """Arrays the optimiser needs from the front's outputs and the calibration snapshot."""
     views = sorted(front.poses)

@@ -34,8 +34,10 @@ def handle(args: argparse.Namespace) -> int:
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
     from rich.table import Table
 
-    from reconstruct.outputs.evaluate import evaluate
+    from core.session import Session
+    from reconstruct.outputs.evaluate import colour_rows, evaluate, information_floor
     from reconstruct.run.logfile import run_logged
+    from reconstruct.run.pipeline import session_responses
     from rig.capture import run_capture
     from rig.demo_profile import demo_profile
     from rig.warmup import compile_kernels_once
@@ -86,6 +88,9 @@ def handle(args: argparse.Namespace) -> int:
             truth / "reflectance.npy",
             None if offset is None else np.asarray(offset, dtype=float),
         )
+        floor = information_floor(
+            truth / "reflectance.npy", session_responses(Session.open(session))
+        )
         timings["evaluation"] = time.perf_counter() - t
         bar.update(task, advance=1, description="demo: done")
     initial = initial_accuracy(Path(rec.report["initial_mesh"]), truth / "mesh.ply")
@@ -95,6 +100,10 @@ def handle(args: argparse.Namespace) -> int:
     table.add_column("value", justify="right")
     for key, value in ev.table():
         table.add_row(key, value)
+    # how far from the physical limit: the 2-D estimator given the true shading, no noise
+    table.add_row("information floor: spectral RMSE", f"{floor['rmse_mean']:.4f}")
+    for key, value in colour_rows(floor["colour"]):
+        table.add_row(f"information floor: {key}", value)
     if offset is not None and ev.light_offset_m is not None:
         table.add_row("light offset: estimate", _cm(ev.light_offset_m))
         table.add_row("light offset: truth", _cm(offset))

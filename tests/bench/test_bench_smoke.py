@@ -81,6 +81,14 @@ def test_paper_sim_bench(tmp_path: Path) -> None:
         assert 0 <= r["rmse_median"] and math.isfinite(r["rmse_mean"])
         assert r["observed_vertices"] > 0
         assert (tmp_path / f"paper_sim_blob_{mode}_spectral_error_map.png").is_file()
+        d65 = next(c for c in r["colour"] if c["illuminant"] == "D65")
+        assert d65["per_vertex"]["mean"] > 0 and len(d65["patches"]) > 0
+    # the information floor: what the illuminations and camera allow, below every method
+    floor = blob["floor"]
+    assert 0 < floor["rmse_mean"] < blob["oracle"]["rmse_mean"]
+    assert [c["illuminant"] for c in floor["colour"]] == ["D65", "A"]
+    assert len(floor["colour"][0]["patches"]) == 24
+    assert "ΔE00 D65 patch mean / max" in data["tables"][0]["columns"]
     assert blob["joint"]["light_position_error_m"] is not None
     # the oracle knows shape, light and shadows: its typical vertex beats the 2-D baseline's
     assert blob["oracle"]["rmse_median"] < blob["baseline"]["rmse_median"]

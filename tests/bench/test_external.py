@@ -11,6 +11,7 @@ import pytest
 
 pytest.importorskip("mitsuba")
 
+from bench._common import information_floor
 from bench.external_render import ShadingRenderer, compose
 from bench.external_scene import SceneSpec
 from bench.external_session import Size, build_session
@@ -102,6 +103,12 @@ def test_tiny_session_decodes_to_the_composed_image(shared_data: Path, tmp_path:
     assert lit.mean() > 5 * amb.mean() > 0  # the bulb dominates, the ambient is there
     decoded = decode.run({}, session, tmp_path / "decoded")  # rig reconstruct's decode stage
     assert len(sorted(Path(decoded).glob("frame_*_sat.npy"))) == 12
+    # the information floor of the session's two lamps and camera, per vertex and per patch
+    floor = information_floor(session)
+    assert 0 < floor["rmse_mean"] < 0.2
+    d65 = floor["colour"][0]
+    assert d65["illuminant"] == "D65" and 0 < d65["per_vertex"]["mean"] < 10
+    assert len(d65["patches"]) > 1 and d65["patch_max"] >= d65["patch_mean"] > 0
 
 
 def test_coarse_meshes_are_subdivided_to_a_smooth_scored_surface(tmp_path: Path) -> None:

@@ -219,3 +219,70 @@ def test_config_errors_name_the_file_and_section(tmp_path: Path) -> None:
     assert half.params == (400.0, 400.0, 160.0, 120.0)
     with pytest.raises(RigError, match="decoded frames"):
         _scaled(Intrinsics.pinhole(640, 480, 800.0), 320, 200)
+
+
+def test_evaluate_reports_ciede2000_per_vertex_and_per_patch(
+    recon_dir: Path, scene: SyntheticScene, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    gt_mesh = tmp_path / "gt.ply"
+    trimesh.Trimesh(scene.vertices, scene.faces, process=False).export(gt_mesh)
+    truth = tmp_path / "reflectance.npy"
+    np.save(truth, scene.reflectance)
+    # without patch.npy: ΔE00 per vertex only, zero for the truth itself
+    ev = evaluate(recon_dir, gt_mesh, truth)
+    assert [c["illuminant"] for c in ev.colour] == ["D65", "A"]
+    assert all(c["per_vertex"]["p90"] < 1e-6 and not c["patches"] for c in ev.colour)
+    # a brighter truth on two patches, labelled in patch.npy beside the reflectance
+    n = len(scene.vertices)
+    patch = np.where(np.arange(n) < n // 2, 0, 1)
+    patch[:3] = -1
+    np.save(tmp_path / "patch.npy", patch)
+    np.save(truth, scene.reflectance * 1.1)
+    csv = tmp_path / "lamp.csv"
+    samples = "".join(f"{w},{w / 100}\n" for w in range(390, 711, 20))
+    csv.write_text("wavelength_nm,power\n" + samples)
+    code = main(["evaluate", str(recon_dir.parent), "--gt-mesh", str(gt_mesh),
+                 "--gt-reflectance", str(truth), "--illuminant", "FL2",
+                 "--illuminant", str(csv)])  # fmt: skip
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert "ΔE00 D65 per vertex" in printed and "ΔE00 FL2 per patch" in printed
+    assert "ΔE00 lamp" in printed and "per patch" in printed
+    saved = json.loads((recon_dir / "evaluation.json").read_text())
+    colour = {c["illuminant"]: c for c in saved["colour"]}
+    assert list(colour) == ["D65", "A", "FL2", "lamp"]
+    for c in colour.values():
+        assert 0.5 < c["per_vertex"]["mean"] < 10
+        assert [p["name"] for p in c["patches"]] == ["dark skin", "light skin"]
+        assert c["patch_max"] >= c["patch_mean"] > 0.5
+
+
+def test_evaluate_a_sim_truth_names_its_colorchecker_patches(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from drivers.sim.rig import SimRig
+
+    gt = tmp_path / "session" / "ground_truth"
+    SimRig({"views": 4, "subdivisions": 3}, seed=0).write_ground_truth(gt)
+    mesh = trimesh.load(gt / "mesh.ply", process=False)
+    truth = np.load(gt / "reflectance.npy")
+    n = len(mesh.vertices)
+    estimate = truth.copy()
+    estimate[np.load(gt / "patch.npy") == 0] *= 1.25  # "dark skin" read too bright
+    recon = tmp_path / "session" / "recon"
+    recon.mkdir()
+    wl = np.arange(400.0, 701.0, 10.0)
+    export.write_reflectance_npz(
+        recon / export.REFLECTANCE_FILE, np.asarray(mesh.vertices), np.asarray(mesh.faces),
+        np.asarray(mesh.vertex_normals), wl, estimate, np.zeros((n, 8)), np.zeros((31, 8)),
+        np.ones(n, bool),
+    )  # fmt: skip
+    args = ["evaluate", str(tmp_path / "session"), "--gt-mesh", str(gt / "mesh.ply"),
+            "--gt-reflectance", str(gt / "reflectance.npy")]  # fmt: skip
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    assert "dark skin" in printed and "ΔE00 A per patch (24)" in printed
+    colour = json.loads((recon / "evaluation.json").read_text())["colour"]
+    d65 = {p["name"]: p["delta_e00"] for p in colour[0]["patches"]}
+    assert d65["dark skin"] > 1.0 and colour[0]["patch_max"] == d65["dark skin"]
+    assert max(v for k, v in d65.items() if k != "dark skin") < 1e-6
