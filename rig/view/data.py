@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from core.errors import RigError
 from core.session import RECON_DIR
 from reconstruct.model.camera import read_colmap_text
 from reconstruct.outputs.evaluate import interpolate_at, load_mesh
 from reconstruct.outputs.export import REFLECTANCE_FILE, read_reflectance_npz
+from reconstruct.outputs.result import recon_dir_of
 
 
 @dataclass
@@ -38,18 +38,6 @@ class ViewData:
         if self.truth is None:
             return None
         return np.sqrt(np.mean((self.reflectance - self.truth) ** 2, axis=1))
-
-
-def recon_dir_of(path: Path) -> Path:
-    """``SESSION`` or ``SESSION/recon`` -> the folder holding reflectance.npz."""
-    path = Path(path)
-    for candidate in (path, path / RECON_DIR):
-        if (candidate / REFLECTANCE_FILE).is_file():
-            return candidate
-    raise RigError(
-        f"{path} holds no {REFLECTANCE_FILE} (nor does {path / RECON_DIR})",
-        f"run `rig reconstruct {path}` first, or give its recon/ folder",
-    )
 
 
 def load_view_data(path: Path) -> ViewData:

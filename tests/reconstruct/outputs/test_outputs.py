@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import colour
 import numpy as np
 import pytest
 import trimesh
@@ -18,6 +19,7 @@ from reconstruct.optimise.synthetic import SyntheticScene
 from reconstruct.outputs import export
 from reconstruct.outputs.evaluate import evaluate, surface_distance
 from reconstruct.outputs.relight import Camera, encode_srgb, relight
+from reconstruct.outputs.result import load_result
 from reconstruct.run.pipeline import export_result
 from rig.cli import main
 
@@ -75,6 +77,50 @@ def test_ply_reads_back_with_trimesh_and_plain_parsing(
     assert "format binary_little_endian 1.0" in text
     assert "property float refl_400" in text and "property float refl_700" in text
     assert "property uchar red" in text
+
+
+def test_ply_spectra_reach_plyfile(recon_dir: Path, scene: SyntheticScene) -> None:
+    plyfile = pytest.importorskip("plyfile")
+    vertex = plyfile.PlyData.read(str(recon_dir / export.MESH_FILE))["vertex"]
+    assert np.allclose(vertex["refl_700"], scene.reflectance[:, 30], atol=1e-6)
+    assert "position_std_m" in vertex.data.dtype.names
+
+
+def test_load_result_gives_mesh_spectra_uncertainty_and_report(
+    recon_dir: Path, scene: SyntheticScene
+) -> None:
+    session = recon_dir.parent
+    for path in (recon_dir, session, str(session)):
+        assert load_result(path).paths.recon_dir == recon_dir
+    result = load_result(session)
+    n = len(scene.vertices)
+    assert np.allclose(result.mesh.vertices, scene.vertices, atol=1e-7)
+    assert np.array_equal(result.mesh.faces, scene.faces)
+    # the PLY's properties, which trimesh alone leaves in metadata['_ply_raw']
+    attributes = result.mesh.vertex_attributes
+    assert np.allclose(attributes["refl_550"], scene.reflectance[:, 15], atol=1e-6)
+    assert {"red", "green", "blue", "refl_400", "refl_700"} <= set(attributes)
+    assert result.reflectance.shape == (n, 31)
+    assert np.allclose(result.reflectance, scene.reflectance)
+    spectra = result.spectra
+    assert isinstance(spectra, colour.MultiSpectralDistributions)
+    assert np.allclose(spectra[550.0], scene.reflectance[:, 15])
+    assert spectra.values.shape == (31, n)
+    assert result.observed.shape == (n,)
+    assert "light" in result.report
+    assert result.paths.mesh == recon_dir / export.MESH_FILE
+
+
+def test_load_result_finds_the_demo_folders_session(
+    recon_dir: Path, tmp_path: Path
+) -> None:
+    demo = tmp_path / "demo-out"
+    (demo / "session").mkdir(parents=True)
+    (demo / "session" / "session.yaml").write_text("format: 1\n")
+    (demo / "session" / "recon").symlink_to(recon_dir)
+    assert load_result(demo).paths.recon_dir == demo / "session" / "recon"
+    with pytest.raises(RigError, match="holds no reflectance.npz"):
+        load_result(tmp_path)
 
 
 def test_npz_and_report_hold_the_fixed_names(recon_dir: Path, scene: SyntheticScene) -> None:
