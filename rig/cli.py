@@ -32,6 +32,7 @@ COMMANDS: tuple[str, ...] = (
     "board",
     "batch",
     "view",
+    "export",
 )
 
 log = logging.getLogger("rig")

@@ -11,6 +11,7 @@ import pytest
 import trimesh
 import yaml
 
+from calibration.grid import SpectralGrid
 from core.errors import RigError
 from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.settings import OptimiseSettings
@@ -18,10 +19,12 @@ from reconstruct.optimise.steps import OptimiseResult
 from reconstruct.optimise.synthetic import SyntheticScene
 from reconstruct.outputs import export
 from reconstruct.outputs.evaluate import evaluate, surface_distance
-from reconstruct.outputs.relight import Camera, encode_srgb, relight
+from reconstruct.outputs.gltf import Z_UP_TO_Y_UP
+from reconstruct.outputs.relight import Camera, encode_srgb, illuminant_spd, relight
 from reconstruct.outputs.result import load_result
 from reconstruct.run.pipeline import export_result
 from rig.cli import main
+from rig.view.colour import linear_srgb_matrix
 
 
 @pytest.fixture(scope="module")
@@ -265,3 +268,31 @@ def test_config_errors_name_the_file_and_section(tmp_path: Path) -> None:
     assert half.params == (400.0, 400.0, 160.0, 120.0)
     with pytest.raises(RigError, match="decoded frames"):
         _scaled(Intrinsics.pinhole(640, 480, 800.0), 320, 200)
+
+
+def test_export_glb_reads_back_with_linear_colours_and_spectra(
+    recon_dir: Path, scene: SyntheticScene, tmp_path: Path
+) -> None:
+    glb = tmp_path / "model.glb"
+    assert main(["export", str(recon_dir.parent), "--glb", str(glb), "--illuminant", "A"]) == 0
+    loaded = trimesh.load(glb, process=False)  # trimesh's glTF reader
+    (mesh,) = loaded.geometry.values()
+    # z up -> glTF's y up
+    assert np.allclose(mesh.vertices, scene.vertices @ Z_UP_TO_Y_UP.T, atol=1e-6)
+    assert np.array_equal(mesh.faces, scene.faces)
+    for k, w in enumerate(range(400, 701, 10)):
+        values = np.ravel(mesh.vertex_attributes[f"_REFLECTANCE_{w}"])  # a SCALAR accessor
+        assert np.allclose(values, scene.reflectance[:, k], atol=1e-6)
+    # COLOR_0 is linear: the viewer's matrix under A, before the sRGB transfer function
+    grid = SpectralGrid.from_wavelengths(np.arange(400.0, 701.0, 10.0))
+    linear = np.clip(scene.reflectance @ linear_srgb_matrix(grid, illuminant_spd("A", grid)), 0, 1)
+    colours = mesh.visual.vertex_colors[:, :3] / 255.0
+    assert np.abs(colours - linear).max() <= 0.5 / 255 + 1e-9
+    assert not np.allclose(colours, encode_srgb(linear), atol=0.02)  # not sRGB-encoded
+    assert mesh.metadata["illuminant"] == "A"
+
+
+def test_export_refuses_a_name_without_glb(recon_dir: Path, tmp_path: Path) -> None:
+    with pytest.raises(SystemExit):
+        main(["export", str(recon_dir)])
+    assert main(["export", str(recon_dir), "--glb", str(tmp_path / "model.gltf")]) == 2
