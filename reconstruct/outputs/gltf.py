@@ -13,6 +13,7 @@ written by trimesh's glTF exporter.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import trimesh
@@ -44,7 +45,7 @@ def write_glb(
     normals = np.asarray(result.mesh.vertex_normals, float) @ Z_UP_TO_Y_UP.T
     rgb = np.round(linear_colours(result, illuminant) * 255.0).astype(np.uint8)
     alpha = np.full((len(rgb), 1), 255, np.uint8)
-    spectra = {
+    spectra: dict[str, Any] = {
         reflectance_attribute(w): result.reflectance[:, k].astype(np.float32)
         for k, w in enumerate(result.wavelengths_nm)
     }
