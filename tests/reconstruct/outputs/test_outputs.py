@@ -296,3 +296,19 @@ def test_export_refuses_a_name_without_glb(recon_dir: Path, tmp_path: Path) -> N
     with pytest.raises(SystemExit):
         main(["export", str(recon_dir)])
     assert main(["export", str(recon_dir), "--glb", str(tmp_path / "model.gltf")]) == 2
+
+
+def test_commands_accept_the_demo_folder(recon_dir: Path, tmp_path: Path) -> None:
+    demo = tmp_path / "demo-out"  # `rig demo --out demo-out` puts its session in session/
+    (demo / "session").mkdir(parents=True)
+    (demo / "session" / "session.yaml").write_text("format: 1\n")
+    (demo / "session" / "recon").symlink_to(recon_dir)
+    camera = tmp_path / "cam.yaml"
+    camera.write_text(yaml.safe_dump(
+        {"width": 32, "height": 24, "focal_px": 50.0, "eye": [0.3, 0.0, 0.1], "target": [0, 0, 0]}
+    ))
+    assert main(["view", str(demo), "--export", str(tmp_path / "v.html")]) == 0
+    assert main(["export", str(demo), "--glb", str(tmp_path / "m.glb")]) == 0
+    relit = tmp_path / "relit.png"
+    assert main(["relight", str(demo), "--camera", str(camera), "--out", str(relit)]) == 0
+    assert relit.is_file()
