@@ -134,9 +134,11 @@ def handle(args: argparse.Namespace) -> int:
     from rig.next_steps import next_commands
 
     posed = sorted(read_colmap_text(rec.recon_dir / "poses")[1])
-    out_console.print(f"output folder:  {out}\nnext:")
+    out_console.print(f"output folder:  {out}\nnext:", soft_wrap=True)
     for command, what in next_commands(out, posed[0] - 1 if posed else 0):
-        out_console.print(f"  {command:<60}  {what}", highlight=False, markup=False)
+        # one line each, never wrapped: a log keeps commands that can be pasted
+        out_console.print(f"  {command:<60}  {what}", highlight=False, markup=False,
+                          soft_wrap=True)
     return 0
 
 
