@@ -67,10 +67,19 @@ def white_xyz(
 
 
 def reflectance_to_srgb(
-    reflectance: np.ndarray, grid: SpectralGrid = DEFAULT_GRID, illuminant: str | np.ndarray = "D65"
+    reflectance: np.ndarray,
+    grid: SpectralGrid = DEFAULT_GRID,
+    illuminant: str | np.ndarray = "D65",
+    linear: bool = False,
 ) -> np.ndarray:
-    """Gamma-encoded sRGB (…, 3) in [0, 1] of reflectances (…, N_λ) seen under ``illuminant``."""
+    """Gamma-encoded sRGB (…, 3) in [0, 1] of reflectances (…, N_λ) seen under ``illuminant``
+    (white adapted to D65); ``linear``: without the sRGB transfer function (glTF colours)."""
     xy_white = colour.XYZ_to_xy(white_xyz(grid, illuminant))
     xyz = reflectance_to_xyz(reflectance, grid, illuminant)
-    srgb = colour.XYZ_to_sRGB(xyz, illuminant=xy_white, chromatic_adaptation_transform="CAT02")
+    srgb = colour.XYZ_to_sRGB(
+        xyz,
+        illuminant=xy_white,
+        chromatic_adaptation_transform="CAT02",
+        apply_cctf_encoding=not linear,
+    )
     return np.clip(np.nan_to_num(np.asarray(srgb, dtype=float)), 0.0, 1.0)

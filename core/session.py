@@ -23,6 +23,17 @@ RAW_DIR = "raw"
 CALIBRATION_DIR = "calibration"
 POSES_DIR = "poses"
 RECON_DIR = "recon"
+DEMO_SESSION_DIR = "session"  # where `rig demo --out FOLDER` puts its session
+
+
+def find_session(path: Path) -> Path:
+    """``path`` when it holds a session, else its ``session/`` folder when that does (the
+    demo's output folder), else ``path`` unchanged (for the caller's error to name)."""
+    path = Path(path)
+    inner = path / DEMO_SESSION_DIR
+    if not (path / SESSION_FILE).is_file() and (inner / SESSION_FILE).is_file():
+        return inner
+    return path
 
 
 @dataclass
@@ -37,12 +48,12 @@ class Session:
     def open(cls, root: Path, bound_views: bool = True) -> Session:
         """The session at ``root``; a manifest line naming a view beyond the plan is an error
         unless ``bound_views`` is False (`rig session verify` lists such lines instead)."""
-        root = Path(root)
+        root = find_session(root)
         meta = root / SESSION_FILE
         if not meta.is_file():
             raise RigError(
                 f"{root} is not a session directory (no {SESSION_FILE})",
-                "give the folder that `rig capture --out` created",
+                "give the folder that `rig capture --out` (or `rig demo --out`) created",
             )
         try:
             data = load_yaml(meta.read_text(encoding="utf-8"))

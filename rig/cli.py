@@ -31,6 +31,7 @@ COMMANDS: tuple[str, ...] = (
     "board",
     "batch",
     "view",
+    "export",
 )
 
 log = logging.getLogger("rig")

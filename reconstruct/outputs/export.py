@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import trimesh
 
 from calibration.colorimetry import reflectance_to_srgb
 from calibration.grid import SpectralGrid
@@ -62,38 +63,21 @@ def write_ply(
         reflectance, SpectralGrid.from_wavelengths(np.asarray(wavelengths_nm))
     )
     rgb8 = np.clip(np.round(srgb * 255.0), 0, 255).astype(np.uint8)
-    vtype = np.dtype(
-        [(k, "<f4") for k in ("x", "y", "z", "nx", "ny", "nz")]
-        + [(k, "u1") for k in ("red", "green", "blue")]
-        + [(f"refl_{w}", "<f4") for w in wl]
-        + [(k, "<f4") for k in extra or {}]
+    # every property a named 1-D attribute: trimesh writes each as `property <type> <name>`,
+    # in this order, after x y z and nx ny nz
+    attributes: dict[str, Any] = {
+        name: rgb8[:, k] for k, name in enumerate(("red", "green", "blue"))
+    }
+    attributes |= {f"refl_{w}": reflectance[:, k].astype("<f4") for k, w in enumerate(wl)}
+    attributes |= {name: np.asarray(v, "<f4") for name, v in (extra or {}).items()}
+    mesh = trimesh.Trimesh(
+        vertices=vertices,
+        faces=faces,
+        vertex_normals=normals,
+        vertex_attributes=attributes,
+        process=False,
     )
-    vert = np.empty(n, dtype=vtype)
-    for k, name in enumerate("xyz"):
-        vert[name] = vertices[:, k]
-        vert["n" + name] = normals[:, k]
-    for k, name in enumerate(("red", "green", "blue")):
-        vert[name] = rgb8[:, k]
-    for k, w in enumerate(wl):
-        vert[f"refl_{w}"] = reflectance[:, k]
-    for name, values in (extra or {}).items():
-        vert[name] = values
-    ftype = np.dtype([("count", "u1"), ("i", "<i4", (3,))])
-    face = np.empty(len(faces), dtype=ftype)
-    face["count"] = 3
-    face["i"] = faces
-    header = [
-        "ply",
-        "format binary_little_endian 1.0",
-        "comment spectral-rig reconstruction",
-        f"element vertex {n}",
-    ]
-    header += [f"property float {k}" for k in ("x", "y", "z", "nx", "ny", "nz")]
-    header += [f"property uchar {k}" for k in ("red", "green", "blue")]
-    header += [f"property float refl_{w}" for w in wl]
-    header += [f"property float {k}" for k in extra or {}]
-    header += [f"element face {len(faces)}", "property list uchar int vertex_indices", "end_header"]
-    data = ("\n".join(header) + "\n").encode("ascii") + vert.tobytes() + face.tobytes()
+    data = trimesh.exchange.ply.export_ply(mesh, encoding="binary", vertex_normal=True)
     _atomic(path, data)
     return path
 

@@ -28,6 +28,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
+    from contextlib import ExitStack
+
     import numpy as np
     import yaml
     from rich.console import Console
@@ -35,11 +37,14 @@ def handle(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     from core.session import Session
+    from reconstruct.model.camera import read_colmap_text
     from reconstruct.outputs.evaluate import colour_rows, evaluate, information_floor
     from reconstruct.run.logfile import run_logged
     from reconstruct.run.pipeline import session_responses
     from rig.capture import run_capture
     from rig.demo_profile import demo_profile
+    from rig.next_steps import next_commands
+    from rig.progress_lines import ProgressLines
     from rig.warmup import compile_kernels_once
 
     if args.views < 6:
@@ -59,25 +64,38 @@ def handle(args: argparse.Namespace) -> int:
     compile_kernels_once(console)
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
-    with Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=False,
-    ) as bar:
+    with ExitStack() as stack:
+        # live bars on a terminal; on a log or pipe, plain lines every 30 s
+        bar = stack.enter_context(Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            TimeElapsedColumn(),
+            console=console,
+            transient=False,
+            disable=not console.is_terminal,
+        ))
+        lines = None if console.is_terminal else stack.enter_context(
+            ProgressLines(console, recon_dir=session / "recon")
+        )
+
+        def step(description: str, advance: int) -> None:
+            bar.update(task, advance=advance, description=description)
+            if lines is not None:
+                lines.step(description)
+
         task = bar.add_task("demo: simulated capture", total=3)
+        step("demo: simulated capture", 0)
         t = time.perf_counter()
         with open(out / "capture.txt", "w", encoding="utf-8") as capture_log:
             # the per-view prompts are for a person holding the camera: shown with -v only
             prompts = console if args.verbose else Console(file=capture_log, width=100)
             run_capture(profile_path, session, yes=True, seed=args.seed, console=prompts)
         timings["capture"] = time.perf_counter() - t
-        bar.update(task, advance=1, description="demo: reconstruction")
+        step("demo: reconstruction", 1)
         t = time.perf_counter()
         rec = run_logged(session, config, None, args.verbose, console)
         timings["reconstruction"] = time.perf_counter() - t
-        bar.update(task, advance=1, description="demo: evaluation")
+        step("demo: evaluation", 1)
         t = time.perf_counter()
         truth = session / "ground_truth"
         rig = yaml.safe_load((truth / "rig.yaml").read_text())
@@ -92,7 +110,7 @@ def handle(args: argparse.Namespace) -> int:
             truth / "reflectance.npy", session_responses(Session.open(session))
         )
         timings["evaluation"] = time.perf_counter() - t
-        bar.update(task, advance=1, description="demo: done")
+        step("demo: done", 1)
     initial = initial_accuracy(Path(rec.report["initial_mesh"]), truth / "mesh.ply")
     pose_source, centre_mm, rotation_deg = pose_errors(rec.recon_dir / "poses", truth / "poses")
     table = Table(title="rig demo: reconstruction vs simulator truth")
@@ -121,6 +139,12 @@ def handle(args: argparse.Namespace) -> int:
     out_console.print(f"reconstruction: {rec.recon_dir} (mesh.ply, reflectance.npz, report.json)")
     out_console.print(f"plots:          {', '.join(p.name for p in rec.plots)}")
     out_console.print(f"evaluation:     {', '.join(Path(f).name for f in ev.files)}")
+    posed = sorted(read_colmap_text(rec.recon_dir / "poses")[1])
+    out_console.print(f"output folder:  {out}\nnext:", soft_wrap=True)
+    for command, what in next_commands(out, posed[0] - 1 if posed else 0):
+        # one line each, never wrapped: a log keeps commands that can be pasted
+        out_console.print(f"  {command:<60}  {what}", highlight=False, markup=False,
+                          soft_wrap=True)
     return 0
 
 

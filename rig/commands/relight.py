@@ -22,7 +22,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description="Render SESSION/recon (mesh + spectral reflectance) from a captured view or "
         "a camera file, lit by a point light with a CIE illuminant or a measured SPD.",
     )
-    parser.add_argument("session", type=Path, help="session directory with recon/")
+    parser.add_argument(
+        "session", type=Path, help="session directory with recon/ (or `rig demo`'s folder)"
+    )
     which = parser.add_mutually_exclusive_group(required=True)
     which.add_argument("--view", type=int, help="render from captured view N")
     which.add_argument(
@@ -83,7 +85,9 @@ def handle(args: argparse.Namespace) -> int:
         raise RigError(f"--exposure {args.exposure} is not positive", "give e.g. 0.8")
     position = None if args.light_pos is None else parse_xyz(args.light_pos, "--light-pos")
     file_camera = None if args.camera is None else load_camera_file(args.camera)
-    recon = Path(args.session) / RECON_DIR
+    from core.session import find_session
+
+    recon = find_session(Path(args.session)) / RECON_DIR
     data = export.read_reflectance_npz(recon / export.REFLECTANCE_FILE)
     report_path = recon / export.REPORT_FILE
     if not report_path.is_file():

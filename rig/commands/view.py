@@ -19,7 +19,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description="Serve (on 127.0.0.1 only) or export one self-contained HTML page: the mesh "
         "in sRGB under a chosen illuminant, a click plots a vertex's spectrum.",
     )
-    p.add_argument("path", type=Path, help="a session folder or its recon/ folder")
+    p.add_argument("path", type=Path,
+                   help="a session folder, its recon/ folder or `rig demo`'s folder")
     p.add_argument("--export", type=Path, metavar="FILE.html",
                    help="write one self-contained page (works offline) instead of serving")
     p.add_argument("--illuminant", action="append", metavar="NAME|FILE",

@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from core.errors import RigError
 from core.session import RECON_DIR
 from reconstruct.model.camera import read_colmap_text
 from reconstruct.outputs.evaluate import interpolate_at, load_mesh
 from reconstruct.outputs.export import REFLECTANCE_FILE, read_reflectance_npz
+from reconstruct.outputs.result import recon_dir_of
 
 
 @dataclass
@@ -29,27 +29,9 @@ class ViewData:
     observed: np.ndarray  # (N,) bool
     initial: np.ndarray | None  # (N, L) the 2-D estimate the solve started from
     truth: np.ndarray | None  # (N, L) ground truth at the vertices
+    basis: np.ndarray | None  # (L, K) the reflectance basis of the solve
     cameras: np.ndarray  # (M, 3) camera centres
     lights: np.ndarray  # (K, 3) estimated light positions
-
-    @property
-    def spectral_error(self) -> np.ndarray | None:
-        """Per-vertex RMSE against the truth, when there is one."""
-        if self.truth is None:
-            return None
-        return np.sqrt(np.mean((self.reflectance - self.truth) ** 2, axis=1))
-
-
-def recon_dir_of(path: Path) -> Path:
-    """``SESSION`` or ``SESSION/recon`` -> the folder holding reflectance.npz."""
-    path = Path(path)
-    for candidate in (path, path / RECON_DIR):
-        if (candidate / REFLECTANCE_FILE).is_file():
-            return candidate
-    raise RigError(
-        f"{path} holds no {REFLECTANCE_FILE} (nor does {path / RECON_DIR})",
-        f"run `rig reconstruct {path}` first, or give its recon/ folder",
-    )
 
 
 def load_view_data(path: Path) -> ViewData:
@@ -68,6 +50,7 @@ def load_view_data(path: Path) -> ViewData:
         reflectance=arrays["reflectance"].astype(float),
         observed=arrays.get("observed", np.ones(n, bool)).astype(bool),
         initial=arrays.get("initial_reflectance"),
+        basis=arrays.get("basis"),
         truth=_truth_at(recon.parent / "ground_truth", vertices, arrays["wavelengths_nm"]),
         cameras=_camera_centres(recon / "poses"),
         lights=lights.reshape(-1, 3),

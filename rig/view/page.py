@@ -5,7 +5,6 @@ truth when known); cameras and estimated lights; the spectral-error map when a t
 
 from __future__ import annotations
 
-import base64
 import json
 from importlib.resources import files
 from pathlib import Path
@@ -16,29 +15,26 @@ from plotly.offline import get_plotlyjs
 
 from core.files import write_bytes_atomically
 from core.lock import output_lock
+from rig.view import pack
 from rig.view.data import ViewData
 
 
-def _b64(array: np.ndarray, dtype: str) -> str:
-    return base64.b64encode(np.ascontiguousarray(array, dtype=dtype).tobytes()).decode()
-
-
 def payload(data: ViewData, matrices: dict[str, np.ndarray]) -> dict[str, Any]:
-    """The page's data: float32/float16 arrays as base64 little-endian bytes."""
+    """The page's data: arrays packed by :mod:`rig.view.pack` (about 40-60 bytes a vertex)."""
     n, bands = data.reflectance.shape
-    error = data.spectral_error
+    basis = np.zeros((bands, 0)) if data.basis is None else np.asarray(data.basis, float)
     return {
         "name": data.name,
         "n": n,
         "bands": bands,
         "wavelengths": data.wavelengths_nm.tolist(),
-        "vertices": _b64(data.vertices, "<f4"),
-        "faces": _b64(data.faces, "<i4"),
-        "reflectance": _b64(data.reflectance, "<f2"),
-        "initial": None if data.initial is None else _b64(data.initial, "<f2"),
-        "truth": None if data.truth is None else _b64(data.truth, "<f2"),
-        "error": None if error is None else _b64(error, "<f4"),
-        "observed": _b64(data.observed, "u1"),
+        "basis": basis.tolist(),
+        "vertices": pack.positions(data.vertices),
+        "faces": pack.deflated(data.faces.astype("<i4")),
+        "reflectance": pack.spectra(data.reflectance, basis),
+        "initial": None if data.initial is None else pack.spectra(data.initial, basis),
+        "truth": None if data.truth is None else pack.spectra(data.truth, basis),
+        "observed": pack.deflated(data.observed.astype("u1")),
         "cameras": data.cameras.tolist(),
         "lights": data.lights.tolist(),
         "illuminants": {name: m.ravel().tolist() for name, m in matrices.items()},

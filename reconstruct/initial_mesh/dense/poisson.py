@@ -29,15 +29,11 @@ def read_mesh(path: Path, process: bool = False) -> trimesh.Trimesh:
 
 
 def write_oriented_ply(path: Path, points: np.ndarray, normals: np.ndarray) -> None:
-    """Binary little-endian PLY with x y z nx ny nz (float32)."""
-    data = np.hstack([points, normals]).astype("<f4")
-    header = (
-        "ply\nformat binary_little_endian 1.0\n"
-        f"element vertex {len(data)}\n"
-        + "".join(f"property float {n}\n" for n in ("x", "y", "z", "nx", "ny", "nz"))
-        + "end_header\n"
+    """Binary little-endian PLY with x y z nx ny nz (float32) and no faces."""
+    cloud = trimesh.Trimesh(
+        vertices=points, faces=np.zeros((0, 3), np.int64), vertex_normals=normals, process=False
     )
-    path.write_bytes(header.encode() + data.tobytes())
+    path.write_bytes(trimesh.exchange.ply.export_ply(cloud, encoding="binary", vertex_normal=True))
 
 
 def poisson_mesh(

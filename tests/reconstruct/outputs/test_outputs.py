@@ -5,11 +5,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import colour
 import numpy as np
 import pytest
 import trimesh
 import yaml
 
+from calibration.grid import SpectralGrid
 from core.errors import RigError
 from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.settings import OptimiseSettings
@@ -17,9 +19,12 @@ from reconstruct.optimise.steps import OptimiseResult
 from reconstruct.optimise.synthetic import SyntheticScene
 from reconstruct.outputs import export
 from reconstruct.outputs.evaluate import evaluate, surface_distance
-from reconstruct.outputs.relight import Camera, encode_srgb, relight
+from reconstruct.outputs.gltf import Z_UP_TO_Y_UP
+from reconstruct.outputs.relight import Camera, encode_srgb, illuminant_spd, relight
+from reconstruct.outputs.result import load_result
 from reconstruct.run.pipeline import export_result
 from rig.cli import main
+from rig.view.colour import linear_srgb_matrix
 
 
 @pytest.fixture(scope="module")
@@ -75,6 +80,50 @@ def test_ply_reads_back_with_trimesh_and_plain_parsing(
     assert "format binary_little_endian 1.0" in text
     assert "property float refl_400" in text and "property float refl_700" in text
     assert "property uchar red" in text
+
+
+def test_ply_spectra_reach_plyfile(recon_dir: Path, scene: SyntheticScene) -> None:
+    plyfile = pytest.importorskip("plyfile")
+    vertex = plyfile.PlyData.read(str(recon_dir / export.MESH_FILE))["vertex"]
+    assert np.allclose(vertex["refl_700"], scene.reflectance[:, 30], atol=1e-6)
+    assert {"red", "refl_400"} <= set(vertex.data.dtype.names)
+
+
+def test_load_result_gives_mesh_spectra_uncertainty_and_report(
+    recon_dir: Path, scene: SyntheticScene
+) -> None:
+    session = recon_dir.parent
+    for path in (recon_dir, session, str(session)):
+        assert load_result(path).paths.recon_dir == recon_dir
+    result = load_result(session)
+    n = len(scene.vertices)
+    assert np.allclose(result.mesh.vertices, scene.vertices, atol=1e-7)
+    assert np.array_equal(result.mesh.faces, scene.faces)
+    # the PLY's properties, which trimesh alone leaves in metadata['_ply_raw']
+    attributes = result.mesh.vertex_attributes
+    assert np.allclose(attributes["refl_550"], scene.reflectance[:, 15], atol=1e-6)
+    assert {"red", "green", "blue", "refl_400", "refl_700"} <= set(attributes)
+    assert result.reflectance.shape == (n, 31)
+    assert np.allclose(result.reflectance, scene.reflectance)
+    spectra = result.spectra
+    assert isinstance(spectra, colour.MultiSpectralDistributions)
+    assert np.allclose(spectra[550.0], scene.reflectance[:, 15])
+    assert spectra.values.shape == (31, n)
+    assert result.observed.shape == (n,)
+    assert "light" in result.report
+    assert result.paths.mesh == recon_dir / export.MESH_FILE
+
+
+def test_load_result_finds_the_demo_folders_session(
+    recon_dir: Path, tmp_path: Path
+) -> None:
+    demo = tmp_path / "demo-out"
+    (demo / "session").mkdir(parents=True)
+    (demo / "session" / "session.yaml").write_text("format: 1\n")
+    (demo / "session" / "recon").symlink_to(recon_dir)
+    assert load_result(demo).paths.recon_dir == demo / "session" / "recon"
+    with pytest.raises(RigError, match="holds no reflectance.npz"):
+        load_result(tmp_path)
 
 
 def test_npz_and_report_hold_the_fixed_names(recon_dir: Path, scene: SyntheticScene) -> None:
@@ -286,3 +335,47 @@ def test_evaluate_a_sim_truth_names_its_colorchecker_patches(
     d65 = {p["name"]: p["delta_e00"] for p in colour[0]["patches"]}
     assert d65["dark skin"] > 1.0 and colour[0]["patch_max"] == d65["dark skin"]
     assert max(v for k, v in d65.items() if k != "dark skin") < 1e-6
+
+
+def test_export_glb_reads_back_with_linear_colours_and_spectra(
+    recon_dir: Path, scene: SyntheticScene, tmp_path: Path
+) -> None:
+    glb = tmp_path / "model.glb"
+    assert main(["export", str(recon_dir.parent), "--glb", str(glb), "--illuminant", "A"]) == 0
+    loaded = trimesh.load(glb, process=False)  # trimesh's glTF reader
+    (mesh,) = loaded.geometry.values()
+    # z up -> glTF's y up
+    assert np.allclose(mesh.vertices, scene.vertices @ Z_UP_TO_Y_UP.T, atol=1e-6)
+    assert np.array_equal(mesh.faces, scene.faces)
+    for k, w in enumerate(range(400, 701, 10)):
+        values = np.ravel(mesh.vertex_attributes[f"_REFLECTANCE_{w}"])  # a SCALAR accessor
+        assert np.allclose(values, scene.reflectance[:, k], atol=1e-6)
+    # COLOR_0 is linear: the viewer's matrix under A, before the sRGB transfer function
+    grid = SpectralGrid.from_wavelengths(np.arange(400.0, 701.0, 10.0))
+    linear = np.clip(scene.reflectance @ linear_srgb_matrix(grid, illuminant_spd("A", grid)), 0, 1)
+    colours = mesh.visual.vertex_colors[:, :3] / 255.0
+    assert np.abs(colours - linear).max() <= 0.5 / 255 + 1e-9
+    assert not np.allclose(colours, encode_srgb(linear), atol=0.02)  # not sRGB-encoded
+    assert mesh.metadata["illuminant"] == "A"
+
+
+def test_export_refuses_a_name_without_glb(recon_dir: Path, tmp_path: Path) -> None:
+    with pytest.raises(SystemExit):
+        main(["export", str(recon_dir)])
+    assert main(["export", str(recon_dir), "--glb", str(tmp_path / "model.gltf")]) == 2
+
+
+def test_commands_accept_the_demo_folder(recon_dir: Path, tmp_path: Path) -> None:
+    demo = tmp_path / "demo-out"  # `rig demo --out demo-out` puts its session in session/
+    (demo / "session").mkdir(parents=True)
+    (demo / "session" / "session.yaml").write_text("format: 1\n")
+    (demo / "session" / "recon").symlink_to(recon_dir)
+    camera = tmp_path / "cam.yaml"
+    camera.write_text(yaml.safe_dump(
+        {"width": 32, "height": 24, "focal_px": 50.0, "eye": [0.3, 0.0, 0.1], "target": [0, 0, 0]}
+    ))
+    assert main(["view", str(demo), "--export", str(tmp_path / "v.html")]) == 0
+    assert main(["export", str(demo), "--glb", str(tmp_path / "m.glb")]) == 0
+    relit = tmp_path / "relit.png"
+    assert main(["relight", str(demo), "--camera", str(camera), "--out", str(relit)]) == 0
+    assert relit.is_file()

@@ -44,6 +44,17 @@ def test_sim_capture_writes_a_valid_session(
     assert "4 of 4 planned" in info and "16 of 16 planned" in info and "sim" in info
 
 
+def test_session_info_accepts_the_demo_folder(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    demo = tmp_path / "demo-out"  # `rig demo --out demo-out` captures into demo-out/session
+    session = demo / "session"
+    assert main(["capture", "--profile", str(PROFILE), "--out", str(session), "--yes"]) == 0
+    capsys.readouterr()
+    assert main(["session", "info", str(demo)]) == 0
+    assert "16 of 16 planned" in capsys.readouterr().out
+
+
 def test_session_verify_reports_corrupt_and_missing_frames(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
