@@ -10,6 +10,7 @@ Imports only the standard library: it is installed before anything heavy is impo
 from __future__ import annotations
 
 import importlib.machinery
+import logging
 import os
 import signal
 import sys
@@ -103,6 +104,23 @@ def _set_handlers() -> None:
         signal.signal(sig, _handle)
 
 
+def _reraise_logged_stops() -> None:
+    """Libraries that catch BaseException and log it (trimesh does, with a traceback) would
+    swallow the stop: a log record carrying :class:`Interrupted` raises it again instead."""
+    make = logging.getLogRecordFactory()
+    if getattr(make, "reraises_stops", False):
+        return
+
+    def factory(*args: Any, **kwargs: Any) -> logging.LogRecord:
+        record = make(*args, **kwargs)
+        if record.exc_info and isinstance(record.exc_info[1], Interrupted):
+            raise record.exc_info[1]
+        return record
+
+    factory.reraises_stops = True  # type: ignore[attr-defined]
+    logging.setLogRecordFactory(factory)
+
+
 def install(*, raising: bool = True) -> None:
     """Handle both signals from now on (main thread only: Python runs handlers there). With
     ``raising`` the first one raises :class:`Interrupted`; without, it exits at once. Signals a
@@ -112,6 +130,7 @@ def install(*, raising: bool = True) -> None:
     _state.first = None
     _state.raising = raising
     _set_handlers()
+    _reraise_logged_stops()
     _reinstall_after_native_imports()
     signal.pthread_sigmask(signal.SIG_UNBLOCK, SIGNALS)
 

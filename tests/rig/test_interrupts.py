@@ -5,6 +5,7 @@ replaced, and signals before or after the command exiting at once."""
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import signal
 import subprocess
@@ -76,6 +77,25 @@ def test_a_second_signal_while_saving_state_is_noted_not_raised(
     assert run_with(monkeypatch, command) == 143
     one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
     assert saved == ["state"]
+
+
+def test_a_stop_a_library_catches_and_logs_is_raised_again(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    library = logging.getLogger("trimesh")  # catches BaseException and logs it with exc_info
+    went_on: list[str] = []
+
+    def command(args: argparse.Namespace) -> int:
+        try:
+            kill_self(signal.SIGTERM)
+        except BaseException:
+            library.warning("unable to use sparse matrix, falling back!", exc_info=True)
+        went_on.append("the library's fallback")
+        return 0
+
+    assert run_with(monkeypatch, command) == 143
+    one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
+    assert went_on == []
 
 
 def test_a_failure_the_signal_caused_is_reported_as_the_signal(
