@@ -212,7 +212,8 @@ class ShadingRenderer:
             params.update()
             img = np.asarray(self.mi.render(scene, spp=self.spp, seed=j), dtype=np.float32)
             out[3 * j : 3 * j + 3] = np.moveaxis(img, 2, 0)
-        out = out[: self.n_patches]
+        # what the cache keeps, so a first run and a run from the cache capture the same frames
+        out = out[: self.n_patches].astype(np.float16).astype(np.float32)
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
             tmp = path.with_suffix(".tmp.npz")
