@@ -173,10 +173,26 @@ def tracked(recon_dir: Path) -> Iterator[RunStatus]:
         status.end("interrupted", note="stopped by Ctrl-C or SIGTERM")
         raise
     except Exception as error:
-        status.end("failed", error=" ".join(str(error).split()))
+        if _raised_by_a_stop(error):
+            status.end("interrupted", note="stopped by Ctrl-C or SIGTERM")
+        else:
+            status.end("failed", error=" ".join(str(error).split()))
         raise
     else:
         if status.data["status"] == "running":
             status.end("complete")
     finally:
         status.release()
+
+
+def _raised_by_a_stop(error: BaseException) -> bool:
+    """Whether ``error`` came while a Ctrl-C / SIGTERM unwound (a library that catches the
+    interrupt and raises its own error, or a cleanup that failed on the way out)."""
+    seen: set[int] = set()
+    current: BaseException | None = error
+    while current is not None and id(current) not in seen:
+        if isinstance(current, KeyboardInterrupt):
+            return True
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return False

@@ -79,6 +79,24 @@ def test_tracked_records_complete_failed_and_interrupted(tmp_path: Path) -> None
     assert read_status(tmp_path)["status"] == "interrupted"  # type: ignore[index]
 
 
+def test_an_error_raised_while_a_stop_unwinds_is_recorded_as_interrupted(tmp_path: Path) -> None:
+    def library_call() -> None:
+        try:
+            raise KeyboardInterrupt  # SIGTERM arrives inside a library ...
+        except BaseException as stop:
+            raise RuntimeError("native call aborted") from stop  # ... which raises its own
+
+    with pytest.raises(RuntimeError), tracked(tmp_path):
+        library_call()
+    assert read_status(tmp_path)["status"] == "interrupted"  # type: ignore[index]
+    with pytest.raises(RuntimeError), tracked(tmp_path):
+        try:
+            raise KeyboardInterrupt
+        finally:
+            raise RuntimeError("cleanup failed on the way out")
+    assert read_status(tmp_path)["status"] == "interrupted"  # type: ignore[index]
+
+
 def test_an_unreadable_status_is_a_clear_error(tmp_path: Path) -> None:
     (tmp_path / FILE).write_text("{torn")
     with pytest.raises(RigError, match="status.json is unreadable"):
