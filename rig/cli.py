@@ -15,8 +15,9 @@ import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
+from core import interrupts
 from core.errors import RigError
-from rig import __version__, interrupts
+from rig import __version__
 
 # Subcommand -> module in rig.commands exposing ``add_parser(subparsers)``.
 COMMANDS: tuple[str, ...] = (

@@ -23,6 +23,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from core import interrupts
 from core.errors import RigError
 from core.files import write_bytes_atomically
 
@@ -173,7 +174,7 @@ def tracked(recon_dir: Path) -> Iterator[RunStatus]:
         status.end("interrupted", note="stopped by Ctrl-C or SIGTERM")
         raise
     except Exception as error:
-        if _raised_by_a_stop(error):
+        if _raised_by_a_stop(error) or interrupts.received() is not None:
             status.end("interrupted", note="stopped by Ctrl-C or SIGTERM")
         else:
             status.end("failed", error=" ".join(str(error).split()))

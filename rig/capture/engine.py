@@ -24,11 +24,11 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
+from core import interrupts
 from core.errors import RigError
 from core.manifest import FrameRecord
 from core.session import RAW_DIR
 from drivers.protocols import LightSource
-from rig import interrupts
 from rig.capture.board_check import look_for_board
 from rig.capture.devices import Ask, RigDevices, device_errors
 from rig.capture.frames import INCOMING, ExposureCheck, RawData, check_exposure, store_frame

@@ -6,9 +6,9 @@ import argparse
 import importlib
 from pathlib import Path
 
+from core import interrupts
 from core.errors import RigError
 from profiles import shipped_profiles
-from rig import interrupts
 from rig.outpaths import output_dir
 
 

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from rig import cli, interrupts
+from core import interrupts
+from rig import cli
 from rig.commands import session as session_command
 
 REPO = Path(__file__).resolve().parents[2]
@@ -159,7 +160,7 @@ def test_pycolmap_native_sigterm_handler_is_replaced() -> None:
     """Its glog would print a native stack dump and kill the process."""
     proc = python(
         "import os, signal, time\n"
-        "from rig import interrupts\n"
+        "from core import interrupts\n"
         "interrupts.install()\n"
         "import pycolmap\n"
         "try:\n"
@@ -175,7 +176,7 @@ def test_pycolmap_native_sigterm_handler_is_replaced() -> None:
 def test_outside_a_command_a_signal_exits_at_once_with_the_line(signum: int) -> None:
     proc = python(
         "import os, sys, time\n"
-        "from rig import interrupts\n"
+        "from core import interrupts\n"
         "interrupts.install(raising=False)\n"
         "print('printed before', flush=False)\n"
         f"os.kill(os.getpid(), {int(signum)}); time.sleep(10)\n"

@@ -94,7 +94,9 @@ def handlers() -> dict[int, Handler]:
 
 
 def restore(previous: dict[int, Handler]) -> None:
+    """The handlers as they were before :func:`install`; the command's signal is forgotten."""
     _state.raising = False
+    _state.first = None
     for sig, handler in previous.items():
         signal.signal(sig, signal.SIG_DFL if handler is None else handler)
 
