@@ -76,10 +76,11 @@ def test_indicator_renders_sum_to_the_white_render(
         shading = renderer.render(pose, light)
         white = renderer.render_white(pose, light)
         assert white.max() > 0
-        np.testing.assert_allclose(shading.sum(axis=0), white, rtol=1e-5, atol=1e-6)
+        # the shading comes back as float16 keeps it (the cache's precision, 2^-11 relative)
+        np.testing.assert_allclose(shading.sum(axis=0), white, rtol=1e-3, atol=1e-6)
     rgb = np.array([[1.0, 0.0, 0.5], [0.0, 2.0, 0.5]])
     composed = compose(shading, rgb)
-    np.testing.assert_allclose(composed[..., 2], 0.5 * white, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(composed[..., 2], 0.5 * white, rtol=1e-3, atol=1e-6)
 
 
 def test_tiny_session_decodes_to_the_composed_image(shared_data: Path, tmp_path: Path) -> None:
