@@ -123,6 +123,29 @@ def _reraise_logged_stops() -> None:
     logging.setLogRecordFactory(factory)
 
 
+def _redeliver_unraisable_stops() -> None:
+    """A stop raised inside a finaliser or weakref callback (run by the garbage collector
+    anywhere) cannot propagate and would print "Exception ignored": send the signal again,
+    so it is raised once more outside the finaliser."""
+    if getattr(sys.unraisablehook, "redelivers_stops", False):
+        return
+    previous = sys.unraisablehook
+
+    def hook(unraisable: Any) -> None:
+        if isinstance(unraisable.exc_value, Interrupted):
+            _state.first = None
+            # from another thread, a moment later: a signal raised here would be handled
+            # inside this hook, where it cannot propagate either
+            again = threading.Timer(0.01, os.kill, (os.getpid(), unraisable.exc_value.signum))
+            again.daemon = True
+            again.start()
+            return
+        previous(unraisable)
+
+    hook.redelivers_stops = True  # type: ignore[attr-defined]
+    sys.unraisablehook = hook
+
+
 def install(*, raising: bool = True) -> None:
     """Handle both signals from now on (main thread only: Python runs handlers there). With
     ``raising`` the first one raises :class:`Interrupted`; without, it exits at once. Signals a
@@ -133,6 +156,7 @@ def install(*, raising: bool = True) -> None:
     _state.raising = raising
     _set_handlers()
     _reraise_logged_stops()
+    _redeliver_unraisable_stops()
     _reinstall_after_native_imports()
     signal.pthread_sigmask(signal.SIG_UNBLOCK, SIGNALS)
 

@@ -10,6 +10,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -97,6 +98,28 @@ def test_a_stop_a_library_catches_and_logs_is_raised_again(
     assert run_with(monkeypatch, command) == 143
     one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
     assert went_on == []
+
+
+def test_a_stop_raised_in_a_finaliser_is_delivered_again(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    went_on: list[str] = []
+
+    class Finalised:
+        def __del__(self) -> None:  # Python can only report an exception raised here
+            kill_self(signal.SIGTERM)
+
+    def command(args: argparse.Namespace) -> int:
+        Finalised()  # collected at once: the stop arrives inside __del__
+        for _ in range(200):  # the command goes on; the stop comes back within a moment
+            time.sleep(0.01)
+        went_on.append("after the finaliser")
+        return 0
+
+    assert run_with(monkeypatch, command) == 143
+    err = capsys.readouterr().err
+    one_stop_line(err, "SIGTERM", 143)
+    assert "Exception ignored" not in err and went_on == []
 
 
 def test_a_failure_the_signal_caused_is_reported_as_the_signal(
