@@ -196,8 +196,11 @@ def locked(
         return
     created = False
     if create and not folder.exists():
-        folder.mkdir(parents=True)
-        created = True
+        try:
+            folder.mkdir(parents=True)
+            created = True
+        except FileExistsError:  # another process made it meanwhile
+            pass
     try:
         hold = _Hold(_acquire(folder, command, wait_s), 1, created)
     except BaseException:
