@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from calibration.basis import SpectralBasis, default_basis
+from calibration.estimation import response_matrices
 from calibration.grid import DEFAULT_GRID
 from calibration.store import CalibrationStore
 from core.errors import RigError
@@ -35,7 +36,6 @@ from core.yamlio import read_yaml
 from reconstruct.frames.ambient import exposure_ratio, subtract_ambient
 from reconstruct.frames.decode import FLOAT16_RANGE, load_frame
 from reconstruct.model.camera import Intrinsics
-from reconstruct.model.forward import response_matrix
 from reconstruct.model.raycast import RayCaster
 from reconstruct.optimise.checkpoint import FILE as CHECKPOINT_FILE
 from reconstruct.optimise.checkpoint import Checkpoint, input_key
@@ -160,7 +160,7 @@ def session_responses(session: Session) -> np.ndarray:
     sorted by name (as the optimiser stacks them)."""
     names = sorted(session.info.plan.illuminations or [])
     camera, spds = session_spectra(session, names)
-    return np.stack([response_matrix(camera, spds[n]) for n in names])
+    return response_matrices(camera, [spds[n] for n in names])
 
 
 def optimiser_input(front: FrontResult, session: Session, basis: SpectralBasis) -> OptimiseInput:
@@ -177,7 +177,7 @@ def optimiser_input(front: FrontResult, session: Session, basis: SpectralBasis) 
         )
     names = sorted({k[1] for k in keys})
     camera, spds = session_spectra(session, names)
-    responses = np.stack([response_matrix(camera, spds[n]) for n in names])
+    responses = response_matrices(camera, [spds[n] for n in names])
     # Filled in place (stacking a list would hold the frames three times over), in float16 as
     # the decode cache keeps them: half the solve's largest array; samples are float64.
     first = lit_frame(front, keys[0])
