@@ -23,11 +23,13 @@ from rich.progress import (
     TimeElapsedColumn,
     TimeRemainingColumn,
 )
+from rich.text import Text
 
 from core import interrupts
 from core.errors import RigError
 from core.manifest import FrameRecord
 from core.session import RAW_DIR
+from core.text import printable
 from drivers.protocols import LightSource
 from rig.capture.board_check import look_for_board
 from rig.capture.devices import Ask, RigDevices, device_errors
@@ -82,8 +84,8 @@ class StopRequest:
             raise KeyboardInterrupt
         self.requested = True
         self._console.print(
-            "[yellow]stopping after the frame in flight "
-            "(Ctrl-C again to discard it and stop now)[/]"
+            "stopping after the frame in flight (Ctrl-C again to discard it and stop now)",
+            style="yellow",
         )
 
     @contextmanager
@@ -349,7 +351,7 @@ class RunEngine:
                 if attempt == CAPTURE_ATTEMPTS:
                     raise RigError(f"{where}: {exc.problem}", exc.fix) from exc
                 self.console.print(
-                    f"[yellow]{where}: {exc.problem} — capturing it again[/]", highlight=False
+                    Text(printable(f"{where}: {exc.problem} — capturing it again"), "yellow")
                 )
         self.state.done.add(spec.frame)
         self.state.captured += 1
@@ -381,9 +383,9 @@ class RunEngine:
             else "lengthen the exposure or add light"
         )
         self.console.print(
-            f"[yellow]exposure:[/] {label}: the board's paper/ink contrast is only "
+            f"exposure: {label}: the board's paper/ink contrast is only "
             f"{board['contrast']:.2f} (want {BOARD_MIN_CONTRAST}) — {fix}",
-            highlight=False,
+            style="yellow",
         )
 
     def _board_report(self, record: FrameRecord, raw: RawData) -> dict[str, Any]:
@@ -404,17 +406,17 @@ class RunEngine:
         self.state.board_checks[spec.view] = report
         if report["corners"] < BOARD_MIN_CORNERS:
             self.console.print(
-                f"[yellow]board:[/] view {spec.view + 1}: only {report['corners']} board corners "
+                f"board: view {spec.view + 1}: only {report['corners']} board corners "
                 f"found (need {BOARD_MIN_CORNERS}) — keep more of the board in the frame, "
                 "away from the object's shadow and glare",
-                highlight=False,
+                style="yellow",
             )
         return report
 
     def _check_exposure(self, record: FrameRecord, raw: RawData, spec: FrameSpec) -> ExposureCheck:
         check = check_exposure(raw, spec.label, record.exposure_s)
         if check.suggestion:
-            self.console.print(f"[yellow]exposure:[/] {check.suggestion}", highlight=False)
+            self.console.print(f"exposure: {check.suggestion}", style="yellow")
         return check
 
     def _switch_off(self) -> None:

@@ -85,11 +85,10 @@ def _run_batch() -> Callable[..., list[Outcome]]:
 
 def handle(args: argparse.Namespace) -> int:
     run_batch = _run_batch()
-    from rich.console import Console
-
     from reconstruct.run.pipeline import load_config
     from rig.batch.sessions import collect
     from rig.batch.summary import table, write_csv
+    from rig.console import console as plain_console
     from rig.warmup import compile_kernels_once
 
     if args.workers is not None and args.workers < 1:
@@ -103,12 +102,12 @@ def handle(args: argparse.Namespace) -> int:
         output_file(args.summary, "--summary")
     sessions = collect(args.sessions, args.list_file)
     config = load_config(args.config)
-    console = Console(stderr=True)
+    console = plain_console(stderr=True)
     compile_kernels_once(console)  # once, not in every worker
     outcomes = run_batch(
         sessions, config, args.force, args.workers, args.scheduler, args.verbose, console
     )
-    Console().print(table(outcomes))
+    plain_console().print(table(outcomes))
     if args.summary is not None:
         console.print(f"summary: {write_csv(args.summary, outcomes)}", highlight=False)
     failed = [o for o in outcomes if o.status == "failed"]

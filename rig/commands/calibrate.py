@@ -7,6 +7,7 @@ that building the `rig` parser stays fast for every other command.
 from __future__ import annotations
 
 import argparse
+import os
 import re
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -28,7 +29,10 @@ DEFAULT_CAMERA = "Canon EOS 5D Mark II"  # = calibration.defaults.DEFAULT_CAMERA
 def _store_root(args: argparse.Namespace) -> Path:
     from calibration.store import default_store_path
 
-    return output_dir(Path(args.store), "--store") if args.store else default_store_path()
+    if args.store:
+        return output_dir(Path(args.store), "--store")
+    return output_dir(default_store_path(), f"${ENV_STORE}" if os.environ.get(ENV_STORE)
+                      else "the default store")
 
 
 def _store(args: argparse.Namespace, *, must_exist: bool = True) -> CalibrationStore:
@@ -36,12 +40,25 @@ def _store(args: argparse.Namespace, *, must_exist: bool = True) -> CalibrationS
 
     root = _store_root(args)
     if must_exist and not (root / "index.yaml").exists():
+        where = f"`rig calibrate init-store {root}`" if _can_hold_a_store(root) else (
+            "`rig calibrate init-store NEW_FOLDER`"
+        )
         raise RigError(
             f"no calibration store at {root}",
-            f"create one with `rig calibrate init-store {root}` (or pass --store DIR / set "
-            f"${ENV_STORE})",
+            f"create one with {where} (or pass --store DIR / set ${ENV_STORE})",
         )
     return CalibrationStore(root)
+
+
+def _can_hold_a_store(root: Path) -> bool:
+    """Whether ``init-store`` could make ``root`` a store: a new folder, or an empty one, that
+    this user may write (the nearest existing folder on the way)."""
+    if root.is_dir():
+        return not any(root.iterdir()) and os.access(root, os.W_OK | os.X_OK)
+    if root.exists():
+        return False
+    parent = next((p for p in root.parents if p.exists()), None)
+    return parent is not None and parent.is_dir() and os.access(parent, os.W_OK | os.X_OK)
 
 
 def _slug(text: str) -> str:
@@ -50,10 +67,11 @@ def _slug(text: str) -> str:
 
 # -- list / show / remove / init-store ----------------------------------------------------------
 def cmd_list(args: argparse.Namespace) -> int:
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console()
+    from rig.console import console as plain_console
+
+    console = plain_console()
     store = _store(args)
     table = Table(title=f"calibration store {store.root}")
     for col in ("name", "kind", "version", "added", "source / device"):
@@ -68,17 +86,16 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 def cmd_show(args: argparse.Namespace) -> int:
     import numpy as np
-    from rich.console import Console
 
     from calibration.plots import plot_spectrum
+    from rig.console import console as plain_console
 
-    console = Console()
+    console = plain_console()
     store = _store(args)
     entry = store.entry(args.name, args.version)
     w, v = store.read_native(entry)
-    console.print(
-        f"[bold]{entry.name}[/] v{entry.version} ({entry.kind}) — {store.root / entry.file}"
-    )
+    console.print(f"{entry.name} v{entry.version} ({entry.kind}) — {store.root / entry.file}",
+                  style="bold")
     console.print(
         f"  added {entry.added}, {w.size} samples {w[0]:g}–{w[-1]:g} nm, "
         f"sha256 {entry.sha256[:12]}…"
@@ -95,9 +112,9 @@ def cmd_show(args: argparse.Namespace) -> int:
 
 
 def cmd_remove(args: argparse.Namespace) -> int:
-    from rich.console import Console
+    from rig.console import console as plain_console
 
-    console = Console()
+    console = plain_console()
     store = _store(args)
     versions = [e for e in store.entries() if e.name == args.name]
     if args.version is None and len(versions) > 1 and not args.all:
@@ -111,31 +128,30 @@ def cmd_remove(args: argparse.Namespace) -> int:
 
 
 def cmd_init_store(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from calibration.store import CalibrationStore
+    from rig.console import console as plain_console
 
-    console = Console()
+    console = plain_console()
     root = output_dir(Path(args.dir), "DIR") if args.dir else _store_root(args)
     store = CalibrationStore.create_default(root)
     console.print(f"wrote default calibration store to {store.root}:")
     for e in store.entries():
         console.print(f"  {e.kind:6} {e.name}")
     console.print(
-        "[yellow]bulb channel SPDs are models: measure your light and `rig calibrate import` it[/]"
+        "bulb channel SPDs are models: measure your light and `rig calibrate import` it",
+        style="yellow",
     )
     return 0
 
 
 # -- import -------------------------------------------------------------------------------------
 def cmd_import(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from calibration.grid import DEFAULT_GRID
     from calibration.importers import read_spectrum
     from calibration.spectra import resample
+    from rig.console import console as plain_console
 
-    console = Console()
+    console = plain_console()
     store = _store(args, must_exist=False)
     spectrum = read_spectrum(args.file, args.format)
     values = spectrum.column(args.column, args.kind)
@@ -161,7 +177,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     try:
         resample(spectrum.wavelengths_nm, values, DEFAULT_GRID, source=str(args.file))
     except RigError as error:
-        grid_note = f" [yellow](warning: {error})[/]"
+        grid_note = f" (warning: {error})"
     console.print(
         f"added {entry.kind} {entry.name!r} version {entry.version} from {spectrum.format} "
         f"({spectrum.wavelengths_nm.size} samples {spectrum.wavelengths_nm[0]:g}–"
@@ -173,7 +189,6 @@ def cmd_import(args: argparse.Namespace) -> int:
 # -- basis --------------------------------------------------------------------------------------
 def cmd_basis(args: argparse.Namespace) -> int:
     import numpy as np
-    from rich.console import Console
     from rich.table import Table
 
     from calibration.basis import default_basis, pca_basis
@@ -181,8 +196,9 @@ def cmd_basis(args: argparse.Namespace) -> int:
     from calibration.importers import read_reflectance_set
     from calibration.plots import plot_basis
     from calibration.spectra import resample
+    from rig.console import console as plain_console
 
-    console = Console()
+    console = plain_console()
     output_file(Path(args.plot), "--plot")
     if args.out:
         output_file(Path(args.out), "--out")
@@ -266,7 +282,6 @@ def _candidates(args: argparse.Namespace, store: CalibrationStore | None) -> dic
 
 
 def cmd_select(args: argparse.Namespace) -> int:
-    from rich.console import Console
     from rich.table import Table
 
     from calibration import defaults
@@ -277,8 +292,9 @@ def cmd_select(args: argparse.Namespace) -> int:
     from calibration.selection import rank_illumination_sets
     from calibration.spectra import resample
     from calibration.store import CalibrationStore
+    from rig.console import console as plain_console
 
-    console = Console()
+    console = plain_console()
     output_file(Path(args.plot), "--plot")
 
     if args.top < 1:
@@ -286,7 +302,7 @@ def cmd_select(args: argparse.Namespace) -> int:
     root = _store_root(args)
     store = CalibrationStore(root) if (root / "index.yaml").exists() else None
     if store is None:
-        console.print(f"[dim]no calibration store at {root}: using the built-in models[/]")
+        console.print(f"no calibration store at {root}: using the built-in models", style="dim")
     if store is not None and args.camera in store.names("camera"):
         camera = store.camera(args.camera, DEFAULT_GRID)
     else:

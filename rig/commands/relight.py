@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from core.errors import RigError
+from core.text import printable
 from rig.outpaths import output_file
 
 if TYPE_CHECKING:
@@ -128,5 +129,5 @@ def handle(args: argparse.Namespace) -> int:
     )
     out = args.out or recon / "relight" / f"{name}_{illum}.png"
     write_png(Path(out), encode_srgb(image))
-    print(out)
+    print(printable(out))
     return 0

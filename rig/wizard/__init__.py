@@ -82,13 +82,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from calibration import defaults
     from calibration.grid import DEFAULT_GRID
     from calibration.spectra import resample
     from calibration.store import CalibrationStore
     from rig.capture.devices import open_devices
+    from rig.console import console as plain_console
     from rig.profile import load_profile
     from rig.wizard.camera import choose_camera
     from rig.wizard.common import Ask
@@ -97,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     from rig.wizard.scale import scale_lights
     from rig.wizard.selection import selection_report
 
-    console = Console(stderr=True)
+    console = plain_console(stderr=True)
     ask: Ask | None = None if args.yes else console.input
     profile = load_profile(args.profile)
     store_root = Path(args.store).expanduser() if args.store else _default_store()
@@ -124,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
         )
         camera_grid = resample(camera_w, camera_rgb, DEFAULT_GRID, source=camera_name)
         if args.skip_scale:
-            console.print("[yellow]radiometric scale skipped: SPDs stay relative[/]")
+            console.print("radiometric scale skipped: SPDs stay relative", style="yellow")
         else:
             scale_lights(args, profile, devices, lights, camera_grid, ask, console)
     finally:
@@ -136,8 +135,8 @@ def run(args: argparse.Namespace) -> int:
         entry = store.add_light(light.entry, light.wavelengths, values, light.provenance)
         plot_light(light, values, plots, entry.version)
     console.print(
-        f"[green]stored[/] camera '{camera_name}' and {len(lights)} light SPDs in {store.root}",
-        highlight=False,
+        f"stored camera '{camera_name}' and {len(lights)} light SPDs in {store.root}",
+        style="green",
     )
     selection_report(
         {lt.name: lt.on_grid() * (lt.scale or 1.0) for lt in lights},
