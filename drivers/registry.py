@@ -247,11 +247,16 @@ GROUND_TRUTH_DRIVERS = frozenset({"sim"})
 
 
 def check_simulation(section: Mapping[str, Any], source: str) -> None:
-    """Check a profile's ``sim`` section's trajectory when the profile loads (the simulated
-    rig reads the section only when it opens); errors name ``source`` and the key."""
-    if "trajectory" in section:
-        from drivers.sim.trajectory import TrajectoryConfig
+    """Check a profile's ``sim`` section (its numbers' bounds, its trajectory) when the profile
+    loads (the simulated rig reads the section only when it opens); errors name ``source`` and
+    the key."""
+    if not section:
+        return
+    from drivers.sim.rig import SimConfig
+    from drivers.sim.trajectory import TrajectoryConfig
 
+    from_mapping(SimConfig, section, source, "sim")
+    if "trajectory" in section:
         from_mapping(TrajectoryConfig, section["trajectory"], source, "sim.trajectory")
 
 KINDS = {"light": LIGHTS, "camera": CAMERAS, "projector": PROJECTORS, "spectrometer": SPECTROMETERS}

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from core.errors import MissingDependencyError, RigError
+from rig.cliargs import number
 from rig.commands.reconstruct import EXIT_SKIPPED_FRAMES
 from rig.outpaths import output_file
 
@@ -42,7 +43,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--workers",
-        type=int,
+        type=number(int, min=1, max=1024),
         default=None,
         help="worker processes of the local cluster (default: cores, memory permitting)",
     )

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 from core.errors import RigError
 from rig import wizard
+from rig.cliargs import number
 from rig.outpaths import output_dir, output_file
 
 if TYPE_CHECKING:
@@ -394,7 +395,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--serial")
     p.add_argument("--date", help="measurement date")
     p.add_argument("--instrument", help="spectrometer used")
-    p.add_argument("--integration-time-ms", dest="integration_time_ms", type=float)
+    p.add_argument("--integration-time-ms", dest="integration_time_ms",
+                   type=number(float, above=0, max=3_600_000))
     p.add_argument("--operator")
     p.add_argument("--notes")
     p.set_defaults(func=cmd_import)
@@ -407,7 +409,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("basis", parents=[common], help="build the reflectance basis (PCA)")
     p.add_argument("--from", dest="from_file", metavar="FILE.csv", help="reflectance set")
-    p.add_argument("--components", type=int, default=8)
+    p.add_argument("--components", type=number(int, min=1, max=1000), default=8)
     p.add_argument("--out", metavar="NPZ", help="write the basis (.npz)")
     p.add_argument("--plot", metavar="PNG", default="basis.png")
     p.set_defaults(func=cmd_basis)
@@ -417,9 +419,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     group = p.add_mutually_exclusive_group()
     group.add_argument("--lights", help="comma-separated light entries to choose from")
     group.add_argument("--mixtures", action="store_true", help="all on/off mixes of bulb channels")
-    p.add_argument("--max-size", type=int, default=3)
-    p.add_argument("--noise", type=float, default=0.003, help="noise std, fraction of white")
-    p.add_argument("--smoothness", type=float, help="fixed smoothness (default: best per set)")
+    p.add_argument("--max-size", type=number(int, min=1, max=16), default=3)
+    p.add_argument("--noise", type=number(float, min=0, max=1), default=0.003,
+                   help="noise std, fraction of white")
+    p.add_argument("--smoothness", type=number(float, min=0, max=1e6),
+                   help="fixed smoothness (default: best per set)")
     p.add_argument("--reflectances", metavar="FILE.csv", help="reference set (default CC24)")
     p.add_argument("--basis", metavar="NPZ", help="basis from `rig calibrate basis --out`")
     p.add_argument("--top", type=int, default=15, help="rows to print and plot")

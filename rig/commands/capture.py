@@ -10,6 +10,7 @@ from core import interrupts
 from core.errors import RigError
 from core.text import printable
 from profiles import shipped_profiles
+from rig.cliargs import SEED_MAX, number
 from rig.outpaths import output_dir
 
 
@@ -35,7 +36,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--yes", "-y", action="store_true", help="no prompts (simulated rigs, automation)"
     )
     parser.add_argument("--note", default="", help="free text for session.yaml (object, operator)")
-    parser.add_argument("--seed", type=int, default=None, help="simulated scene seed (default 0)")
+    parser.add_argument("--seed", type=number(int, min=0, max=SEED_MAX), default=None,
+                        help="simulated scene seed (default 0)")
     parser.add_argument(
         "--reconstruct",
         action="store_true",

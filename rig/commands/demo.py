@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from core.errors import RigError
+from rig.cliargs import MAX_VIEWS, SEED_MAX, number
 from rig.outpaths import output_dir
 
 
@@ -22,8 +23,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "simulator's ground truth.",
     )
     parser.add_argument("--out", type=Path, default=Path("rig-demo"), help="output folder")
-    parser.add_argument("--views", type=int, default=20, help="camera positions (default 20)")
-    parser.add_argument("--seed", type=int, default=0, help="scene and noise seed")
+    parser.add_argument("--views", type=number(int, min=6, max=MAX_VIEWS), default=20,
+                        help="camera positions (default 20)")
+    parser.add_argument("--seed", type=number(int, min=0, max=SEED_MAX), default=0,
+                        help="scene and noise seed")
     parser.set_defaults(func=handle)
 
 
@@ -47,8 +50,6 @@ def handle(args: argparse.Namespace) -> int:
     from rig.progress_lines import ProgressLines
     from rig.warmup import compile_kernels_once
 
-    if args.views < 6:
-        raise RigError(f"--views {args.views} is too few", "use at least 6 views (default 20)")
     out = output_dir(Path(args.out), "--out").resolve()
     session = out / "session"
     if session.exists():

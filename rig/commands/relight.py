@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 from core.errors import RigError
 from core.text import printable
+from rig.cliargs import MAX_VIEWS, number
 from rig.outpaths import output_file
 
 if TYPE_CHECKING:
@@ -27,7 +28,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "session", type=Path, help="session directory with recon/ (or `rig demo`'s folder)"
     )
     which = parser.add_mutually_exclusive_group(required=True)
-    which.add_argument("--view", type=int, help="render from captured view N")
+    which.add_argument("--view", type=number(int, min=0, max=MAX_VIEWS - 1),
+                       help="render from captured view N (from 0)")
     which.add_argument(
         "--camera",
         type=Path,
@@ -42,7 +44,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--illuminant", default="D65", help="CIE name (D65, A, F2, …) or a CSV wavelength_nm,power"
     )
-    parser.add_argument("--exposure", type=float, default=0.8, help="white at the scene reads this")
+    parser.add_argument("--exposure", type=number(float, above=0, max=1000), default=0.8,
+                        help="white at the scene reads this")
     parser.add_argument(
         "--out", type=Path, default=None, help="PNG path (default in recon/relight/)"
     )
@@ -82,8 +85,6 @@ def handle(args: argparse.Namespace) -> int:
 
     if args.out is not None:
         output_file(args.out, "--out")
-    if not (np.isfinite(args.exposure) and args.exposure > 0):
-        raise RigError(f"--exposure {args.exposure} is not positive", "give e.g. 0.8")
     position = None if args.light_pos is None else parse_xyz(args.light_pos, "--light-pos")
     file_camera = None if args.camera is None else load_camera_file(args.camera)
     from core.session import find_session

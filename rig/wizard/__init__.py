@@ -17,6 +17,7 @@ import argparse
 from pathlib import Path
 
 from core.errors import RigError
+from rig.cliargs import SEED_MAX, number
 
 # calibration.defaults.camera_names() (it loads colour-science), repeated so that the `rig`
 # parser stays light; a test keeps them equal.
@@ -38,7 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "$SPECTRAL_RIG_STORE or ~/.local/share/spectral-rig/calibration)",
     )
     parser.add_argument("--yes", "-y", action="store_true", help="no prompts; use the flags")
-    parser.add_argument("--seed", type=int, default=0, help="simulated rig seed")
+    parser.add_argument("--seed", type=number(int, min=0, max=SEED_MAX), default=0,
+                        help="simulated rig seed")
     parser.add_argument(
         "--import",
         dest="imports",
@@ -56,7 +58,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--camera-file", metavar="CSV", help="measured sensitivity wavelength_nm,R,G,B"
     )
     parser.add_argument(
-        "--reference-distance-m", type=float, help="light to white reference, metres"
+        "--reference-distance-m", type=number(float, above=0, max=100),
+        help="light to white reference, metres"
     )
     parser.add_argument(
         "--reference-reflectance",
@@ -75,7 +78,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="store relative SPDs (the reconstruction then has no absolute scale)",
     )
-    parser.add_argument("--noise", type=float, default=0.01, help="selection noise (fraction)")
+    parser.add_argument("--noise", type=number(float, min=0, max=1), default=0.01,
+                        help="selection noise (fraction)")
     parser.add_argument(
         "--plots", metavar="DIR", help="where to write PNG plots (default STORE/plots)"
     )
