@@ -50,7 +50,7 @@ def open_transport(spec: Mapping[str, Any], where: str = "transport") -> Transpo
     record = options.pop("record", None)
     for key, (number, bounds) in NUMBERS.items():
         if key in options and not (key == "port" and kind != "tcp"):
-            parse_value(options[key], number, where, key, bounds)
+            parse_value(options[key], number, f"{where} has a bad value", key, bounds)
     try:
         timeout = float(options.pop("timeout_s", 1.0))
         transport = _open(kind, options, timeout)

@@ -140,6 +140,12 @@ def coverage_hint(
     )
 
 
+def view_of(view: int, n_views: int) -> str:
+    """A view as every message names it: its number from 0 (as in the manifest, file names and
+    `rig relight --view`), with how far along the plan it is."""
+    return f"view {view} ({view + 1}/{n_views})"
+
+
 def _lit(levels: Mapping[str, float]) -> dict[str, float]:
     return {k: float(v) for k, v in levels.items() if v > 0}
 
@@ -216,8 +222,8 @@ class RunEngine:
                 progress.update(
                     task,
                     advance=1,
-                    description=f"view {msg.spec.view + 1}/"
-                    f"{self.profile.plan.views} {msg.spec.label}",
+                    description=f"{view_of(msg.spec.view, self.profile.plan.views)} "
+                    f"{msg.spec.label}",
                 )
 
     def _stopped(self, note: str = "") -> CaptureStopped:
@@ -280,13 +286,13 @@ class RunEngine:
                 else "Move the plate"
             )
             answer = self._prompt(
-                f"{what} to view {msg.view + 1}/{msg.n_views}{light} "
+                f"{what} to {view_of(msg.view, msg.n_views)}{light} "
                 f"({hint}) and press Enter (q + Enter to stop) "
             )
             if answer.strip().lower() in ("q", "quit", "stop"):
                 raise self._stopped()
         else:
-            self.console.print(f"view {msg.view + 1}/{msg.n_views}: {hint}", highlight=False)
+            self.console.print(f"{view_of(msg.view, msg.n_views)}: {hint}", highlight=False)
         self.devices.goto_view(msg.view)
         if msg.view not in self.state.views_done:
             self.state.views_done.append(msg.view)
@@ -337,7 +343,7 @@ class RunEngine:
         """Capture and store one frame; a file that fails verification (a torn download) is
         discarded and the frame shot again, up to CAPTURE_ATTEMPTS times."""
         incoming = self.session_dir / RAW_DIR / INCOMING
-        where = f"frame {spec.frame} (view {spec.view + 1}, {spec.label})"
+        where = f"frame {spec.frame} (view {spec.view}, {spec.label})"
         for attempt in range(1, CAPTURE_ATTEMPTS + 1):
             stem = f"f{spec.frame:05d}" + (f"_{attempt}" if attempt > 1 else "")
             with device_errors("camera", self.devices.names["camera"], f"capture {where}"):
@@ -406,7 +412,7 @@ class RunEngine:
         self.state.board_checks[spec.view] = report
         if report["corners"] < BOARD_MIN_CORNERS:
             self.console.print(
-                f"board: view {spec.view + 1}: only {report['corners']} board corners "
+                f"board: view {spec.view}: only {report['corners']} board corners "
                 f"found (need {BOARD_MIN_CORNERS}) — keep more of the board in the frame, "
                 "away from the object's shadow and glare",
                 style="yellow",

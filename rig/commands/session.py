@@ -40,7 +40,7 @@ def handle_verify(args: argparse.Namespace) -> int:
     for problem in problems:
         console.print(
             f"{problem.problem:<14} frame {problem.record.frame} (view "
-            f"{problem.record.view + 1}, {problem.record.illumination}): "
+            f"{problem.record.view}, {problem.record.illumination}): "
             f"{problem.record.path}",
             highlight=False,
         )
