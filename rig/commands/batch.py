@@ -8,12 +8,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from core.errors import MissingDependencyError, RigError
-from rig.cliargs import number
 from rig.commands.reconstruct import EXIT_SKIPPED_FRAMES
 from rig.outpaths import output_file
 
 if TYPE_CHECKING:
     from rig.batch.task import Outcome
+
+MAX_WORKERS = 1024  # more processes than any one machine's cores and memory take
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -43,7 +44,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--workers",
-        type=number(int, min=1, max=1024),
+        type=int,
         default=None,
         help="worker processes of the local cluster (default: cores, memory permitting)",
     )
@@ -92,8 +93,9 @@ def handle(args: argparse.Namespace) -> int:
     from rig.console import console as plain_console
     from rig.warmup import compile_kernels_once
 
-    if args.workers is not None and args.workers < 1:
-        raise RigError(f"--workers {args.workers} is not a positive number", "give 1 or more")
+    if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
+        raise RigError(f"--workers {args.workers} is out of range",
+                       f"allowed: a whole number in [1, {MAX_WORKERS}]")
     if args.workers is not None and args.scheduler is not None:
         raise RigError(
             "--workers sizes a local cluster, but --scheduler names an existing one",

@@ -233,7 +233,7 @@ NUMBERS = [
               "--integration-time-ms", "1e308"),
          r"argument --integration-time-ms: 1e308"),
     Case("bound-batch-workers", argv("batch", "TMP", "--workers", "1000000000"),
-         r"argument --workers: 1000000000 .*\[1, 1024\]"),
+         r"--workers 1000000000 is out of range .*\[1, 1024\]"),
     Case("bound-basis-components-zero", argv("calibrate", "basis", "--components", "0"),
          r"argument --components: 0 .*\[1, 1000\]"),
     Case("bound-board-measured-square-huge",
@@ -368,3 +368,16 @@ def test_a_problem_names_the_view_from_zero(
     assert main(["session", "verify", str(session)]) == 1
     line = next(x for x in capsys.readouterr().out.splitlines() if f"frame {record.frame} " in x)
     assert f"(view 0, {record.illumination})" in line
+
+
+def test_a_log_message_stays_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    """Warnings naming a path print it as itself, a newline as an escape."""
+    import logging
+
+    from rig.cli import configure_logging
+
+    configure_logging(0, False)
+    logging.getLogger("core.manifest").warning("%s: ignoring the torn last line %d",
+                                               "/s[/x]\nb", 3)
+    err = capsys.readouterr().err
+    assert "/s[/x]\\nb: ignoring the torn last line 3" in err and len(err.splitlines()) == 1
