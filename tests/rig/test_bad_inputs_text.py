@@ -381,3 +381,22 @@ def test_a_log_message_stays_one_line(capsys: pytest.CaptureFixture[str]) -> Non
                                                "/s[/x]\nb", 3)
     err = capsys.readouterr().err
     assert "/s[/x]\\nb: ignoring the torn last line 3" in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    ("raised", "fix"),
+    [
+        (ValueError("expected non-negative integer"), "check the profile's devices.camera"),
+        (OverflowError("timestamp out of range"), "check the profile's devices.camera"),
+        (OSError(5, "Input/output error"), "cable/power"),
+    ],
+)
+def test_a_device_failure_suggests_a_fix_that_can_work(raised: Exception, fix: str) -> None:
+    """A value no device takes is not blamed on the cable; a failed read or write is."""
+    from core.errors import RigError
+    from rig.capture.devices import device_errors
+
+    with pytest.raises(RigError) as caught, device_errors("camera", "sim", "open"):
+        raise raised
+    assert fix in str(caught.value)
+    assert ("cable" in str(caught.value)) == (fix == "cable/power")
