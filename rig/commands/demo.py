@@ -23,8 +23,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "simulator's ground truth.",
     )
     parser.add_argument("--out", type=Path, default=Path("rig-demo"), help="output folder")
-    parser.add_argument("--views", type=number(int, min=6, max=MAX_VIEWS), default=20,
-                        help="camera positions (default 20)")
+    parser.add_argument("--views", type=int, default=20, help="camera positions (default 20)")
     parser.add_argument("--seed", type=number(int, min=0, max=SEED_MAX), default=0,
                         help="scene and noise seed")
     parser.set_defaults(func=handle)
@@ -50,6 +49,9 @@ def handle(args: argparse.Namespace) -> int:
     from rig.progress_lines import ProgressLines
     from rig.warmup import compile_kernels_once
 
+    if not 6 <= args.views <= MAX_VIEWS:
+        raise RigError(f"--views {args.views} is out of range",
+                       f"allowed: a whole number in [6, {MAX_VIEWS}] (default 20)")
     out = output_dir(Path(args.out), "--out").resolve()
     session = out / "session"
     if session.exists():

@@ -52,6 +52,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=handle)
 
 
+MAX_COORDINATE_M = 1000.0  # a light farther than a kilometre lights a scene of centimetres as 0
+
+
 def parse_xyz(text: str, what: str) -> np.ndarray:
     import numpy as np
 
@@ -65,6 +68,9 @@ def parse_xyz(text: str, what: str) -> np.ndarray:
         raise RigError(f"{what} {text!r} has {v.size} numbers", "give three numbers: x,y,z")
     if not np.all(np.isfinite(v)):
         raise RigError(f"{what} {text!r} is not finite", "give three finite numbers in metres")
+    if np.any(np.abs(v) > MAX_COORDINATE_M):
+        raise RigError(f"{what} {text!r} is too far", f"allowed: each coordinate in "
+                       f"[-{MAX_COORDINATE_M:g}, {MAX_COORDINATE_M:g}] m")
     return v
 
 

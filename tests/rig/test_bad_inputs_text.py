@@ -209,7 +209,7 @@ NUMBERS = [
          argv("capture", "--profile", "sim", "--out", "TMP/o", "--yes", "--seed", "-1"),
          r"^(?!.*cable).*argument --seed: -1 is not allowed .*\[0, 1e\+09\]"),
     Case("bound-demo-views-billion", argv("demo", "--out", "TMP/d", "--views", "1000000000"),
-         r"argument --views: 1000000000 .*\[6, 1000\]"),
+         r"--views 1000000000 is out of range .*\[6, 1000\]"),
     Case("bound-demo-seed-word", argv("demo", "--out", "TMP/d", "--seed", "1e3"),
          r"argument --seed: 1e3"),
     Case("bound-relight-view-negative", argv("relight", "TMP/s", "--view", "-1"),
@@ -244,6 +244,13 @@ NUMBERS = [
     Case("bound-config-solver-iterations", config("optimise: {solver: {max_iterations: "
                                                   "1000000000}}\n"),
          r"solver\.max_iterations' is 1000000000 .*\[0, 10000\]"),
+    Case("bound-relight-light-far", argv("relight", "TMP/s", "--view", "0", "--light-pos",
+                                         "1e300,0,0"),
+         r"--light-pos '1e300,0,0' is too far .*\[-1000, 1000\] m"),
+    Case("bound-relight-camera-eye-far",
+         with_file("cam.yaml", "width: 64\nheight: 48\nfocal_px: 80\neye: [1.0e+300, 0, 0]\n"
+                   "target: [0, 0, 0]\n", "relight", "TMP/s", "--camera", "TMP/cam.yaml"),
+         r"cam\.yaml: key 'eye\[0\]' is 1e\+300|cam\.yaml: key 'eye' .*\[-1000, 1000\]"),
     Case("bound-view-port", argv("view", "TMP", "--port", "70000"),
          r"--port 70000 is not a port number"),
 ]
