@@ -94,7 +94,8 @@ def test_every_command_of_the_guide_runs_on_the_sim_rig(tmp_path: Path) -> None:
             f"block {number} ({lang}) exited {proc.returncode}:\n{code}\n"
             f"stderr:\n{proc.stderr[-3000:]}"
         )
-    glb = trimesh.load(work / "first-scan.glb", process=False)
+    glb = trimesh.load(work / "first-scan.glb", process=False)  # trimesh's glTF reader
+    assert isinstance(glb, trimesh.Scene)
     (mesh,) = glb.geometry.values()
     assert len(mesh.vertices) > 1000 and len(mesh.faces) > 1000
     spectrum = np.ravel(mesh.vertex_attributes["_REFLECTANCE_550"])
