@@ -37,6 +37,7 @@ from calibration.estimation import (
 )
 from core.errors import RigError
 from core.labels import AMBIENT
+from core.lock import locked
 from core.session import Session
 from reconstruct.chart.detect import Layout, detect_chart, layout
 from reconstruct.chart.patches import ChartPatches, read_values
@@ -46,6 +47,7 @@ from reconstruct.frames.ambient import exposure_ratio, subtract_ambient
 from reconstruct.run.pipeline import session_spectra
 
 log = logging.getLogger("reconstruct.chart")
+CHECK_CHART = "rig check-chart"  # what a refused writer is told holds the session
 SHADING_SCALE = 0.05  # relative RGB misfit beyond which a patch counts less (soft L1)
 
 
@@ -184,9 +186,22 @@ def check_session(
     illuminants: Sequence[Illuminant] | None = None,
     basis: SpectralBasis | None = None,
 ) -> ChartCheck:
-    """The chart check of ``session`` (every view, or ``views``); the caller holds its lock
-    (the decode stage writes ``recon/decoded/``)."""
-    chart = layout(chart_layout)
+    """The chart check of ``session`` (every view, or ``views``), holding its lock: the decode
+    stage writes ``recon/decoded/``."""
+    with locked(session.root, CHECK_CHART):
+        return _check(session, reference, layout(chart_layout), views, decode_config,
+                      illuminants, basis)  # fmt: skip
+
+
+def _check(
+    session: Session,
+    reference: Reference,
+    chart: Layout,
+    views: Sequence[int] | None,
+    decode_config: Mapping[str, Any] | None,
+    illuminants: Sequence[Illuminant] | None,
+    basis: SpectralBasis | None,
+) -> ChartCheck:
     if len(reference.reflectance) != chart.size:
         raise RigError(
             f"reference {reference.source} has {len(reference.reflectance)} patches, the "

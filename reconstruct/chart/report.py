@@ -18,7 +18,8 @@ import numpy as np
 
 from calibration.grid import DEFAULT_GRID
 from core.files import write_bytes_atomically
-from reconstruct.chart.check import ChartCheck
+from core.lock import output_lock
+from reconstruct.chart.check import CHECK_CHART, ChartCheck
 from reconstruct.chart.detect import Layout
 
 JSON_FILE = "chart_check.json"
@@ -96,7 +97,12 @@ def plot(check: ChartCheck, chart: Layout, path: Path) -> Path:
 
 
 def write(check: ChartCheck, chart: Layout, out_dir: Path) -> list[Path]:
-    """Write the three files into ``out_dir``; the caller holds the session's lock."""
+    """Write the three files into ``out_dir``, holding the lock of the session it is in."""
+    with output_lock(out_dir, CHECK_CHART):
+        return _write(check, chart, out_dir)
+
+
+def _write(check: ChartCheck, chart: Layout, out_dir: Path) -> list[Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     table = rows(check)
     text = io.StringIO()

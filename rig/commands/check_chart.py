@@ -74,9 +74,9 @@ def handle(args: argparse.Namespace) -> int:
     from rich.console import Console
 
     from calibration.colour_difference import DEFAULT_ILLUMINANTS, illuminant
-    from core.lock import locked, output_lock
+    from core.lock import locked
     from core.session import Session
-    from reconstruct.chart.check import check_session
+    from reconstruct.chart.check import CHECK_CHART, check_session
     from reconstruct.chart.detect import layout
     from reconstruct.chart.reference import default_reference, read_reference
     from reconstruct.chart.report import write
@@ -92,8 +92,7 @@ def handle(args: argparse.Namespace) -> int:
     decode_config = load_config(args.config).get("decode")
     wanted = [*DEFAULT_ILLUMINANTS, *(n for n in args.illuminant if n not in DEFAULT_ILLUMINANTS)]
     lights = [illuminant(n) for n in wanted]
-    # the decode stage writes recon/decoded/: one writer per session
-    with locked(session.root, "rig check-chart"), output_lock(out, "rig check-chart"):
+    with locked(session.root, CHECK_CHART):  # decode and outputs as one writer
         check = check_session(
             session, reference, chart_layout=chart.name, views=args.view,
             decode_config=decode_config, illuminants=lights,
