@@ -47,7 +47,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     parser.add_argument(
         "--illuminant", action="append", default=[], metavar="NAME_OR_CSV",
-        help="also report ΔE00 under this illuminant (CIE name or SPD CSV, repeatable)",
+        help="also report ΔE00 under this illuminant (repeatable): a CIE name, an SPD CSV "
+        "or a light entry of the session's calibration snapshot",
     )  # fmt: skip
     parser.add_argument(
         "--out", type=Path, default=None, help=f"output folder (default SESSION/recon/{OUT_DIR})"
@@ -74,6 +75,7 @@ def handle(args: argparse.Namespace) -> int:
     from rich.console import Console
 
     from calibration.colour_difference import DEFAULT_ILLUMINANTS, illuminant
+    from calibration.store import CalibrationStore
     from core.lock import locked
     from core.session import Session
     from reconstruct.chart.check import CHECK_CHART, check_session
@@ -91,7 +93,8 @@ def handle(args: argparse.Namespace) -> int:
         reference = read_reference(args.reference, chart)
     decode_config = load_config(args.config).get("decode")
     wanted = [*DEFAULT_ILLUMINANTS, *(n for n in args.illuminant if n not in DEFAULT_ILLUMINANTS)]
-    lights = [illuminant(n) for n in wanted]
+    store = CalibrationStore(session.calibration_dir) if session.calibration_dir.is_dir() else None
+    lights = [illuminant(n, store=store) for n in wanted]
     with locked(session.root, CHECK_CHART):  # decode and outputs as one writer
         check = check_session(
             session, reference, chart_layout=chart.name, views=args.view,
