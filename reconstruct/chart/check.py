@@ -173,7 +173,15 @@ def read_view(
     if geometry is None:
         log.info("view %d: no %s chart found", view, chart.name)
         return None
-    return {n: read_values(img, geometry, sat) for n, (img, sat) in lit.items()}
+    patches = {n: read_values(img, geometry, sat) for n, (img, sat) in lit.items()}
+    for name, p in patches.items():
+        unread = np.flatnonzero(~np.all(np.isfinite(p.rgb), axis=1))
+        if len(unread):
+            log.warning(
+                "view %d: patch(es) %s saturated under %s: left out there",
+                view, ", ".join(str(k + 1) for k in unread), name,
+            )  # fmt: skip
+    return patches
 
 
 def check_session(

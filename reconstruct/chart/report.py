@@ -39,6 +39,13 @@ def rows(check: ChartCheck) -> list[dict[str, Any]]:
     return out
 
 
+def _listed(values: np.ndarray) -> list[Any]:
+    """Nested lists with None where a value is NaN (a saturated patch): valid JSON."""
+    out = np.asarray(values, dtype=object)
+    out[~np.isfinite(np.asarray(values, dtype=float))] = None
+    return list(out.tolist())
+
+
 def as_dict(check: ChartCheck) -> dict[str, Any]:
     """JSON-ready: summary, per-patch rows, spectra, and per view the shading plane and the
     patches' linear RGB and spread under each illumination."""
@@ -57,8 +64,8 @@ def as_dict(check: ChartCheck) -> dict[str, Any]:
                 "view": v.view,
                 "shading_plane": v.shading_plane.tolist(),
                 "corners_px": next(iter(v.patches.values())).corners.tolist(),
-                "rgb": {n: p.rgb.tolist() for n, p in v.patches.items()},
-                "spread": {n: p.spread.tolist() for n, p in v.patches.items()},
+                "rgb": {n: _listed(p.rgb) for n, p in v.patches.items()},
+                "spread": {n: _listed(p.spread) for n, p in v.patches.items()},
                 "pixels": {n: p.pixels.tolist() for n, p in v.patches.items()},
             }
             for v in check.views

@@ -85,3 +85,25 @@ def test_a_reference_with_the_wrong_patch_count_or_percent_is_refused(tmp_path: 
 def test_the_default_reference_is_the_colorchecker() -> None:
     ref = default_reference(CHART)
     assert ref.names[0] == "dark skin" and ref.names[18].startswith("white")
+
+
+def test_patches_are_read_inside_their_quads_and_saturated_pixels_are_left_out() -> None:
+    from reconstruct.chart.detect import ChartGeometry
+    from reconstruct.chart.patches import read_values
+
+    image = np.zeros((200, 300, 3), np.float32)
+    quads = np.zeros((24, 4, 2))
+    for k in range(24):
+        r, c = divmod(k, 6)
+        x0, y0 = 10 + 45 * c, 10 + 45 * r
+        image[y0 : y0 + 40, x0 : x0 + 40] = [k, 2 * k, 3 * k]
+        quads[k] = [[x0, y0], [x0 + 40, y0], [x0 + 40, y0 + 40], [x0, y0 + 40]]
+    saturated = np.zeros(image.shape[:2], bool)
+    saturated[55:95, 55:95] = True  # all of patch 8 (row 1, column 1)
+    patches = read_values(image, ChartGeometry(quads, quads[[0, 5, 23, 18], [0, 1, 2, 3]], 0.0),
+                          saturated)  # fmt: skip
+    assert np.all(np.isnan(patches.rgb[7])) and patches.pixels[7] == 0
+    keep = np.arange(24) != 7
+    np.testing.assert_array_equal(patches.rgb[keep], np.arange(24)[keep, None] * [1, 2, 3])
+    assert np.all(patches.spread[keep] == 0)
+    assert np.all((patches.pixels[keep] >= 400) & (patches.pixels[keep] <= 441))  # 20–21 px square
