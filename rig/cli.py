@@ -19,7 +19,7 @@ from core import interrupts
 from core.errors import RigError
 from rig import __version__
 
-# Subcommand -> module in rig.commands exposing ``add_parser(subparsers)``.
+# Subcommand -> module in rig.commands exposing ``add_parser(subparsers)`` (``-`` -> ``_``).
 COMMANDS: tuple[str, ...] = (
     "demo",
     "devices",
@@ -29,6 +29,7 @@ COMMANDS: tuple[str, ...] = (
     "reconstruct",
     "relight",
     "evaluate",
+    "check-chart",
     "board",
     "batch",
     "view",
@@ -59,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
-        module = importlib.import_module(f"rig.commands.{name}")
+        module = importlib.import_module(f"rig.commands.{name.replace('-', '_')}")
         module.add_parser(subparsers)
     return parser
 

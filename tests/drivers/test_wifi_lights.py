@@ -4,11 +4,12 @@ through a fake tinytuya device object."""
 from __future__ import annotations
 
 import socket
+import sys
 import threading
 
 import pytest
 
-from core.errors import RigError
+from core.errors import MissingDependencyError, RigError
 from drivers.lights.magichome import MagicHomeLight
 from drivers.lights.tuya import TuyaBulb
 from drivers.transports.replay import ScriptedTransport
@@ -67,6 +68,35 @@ def test_magic_home_rejects_a_corrupt_state_reply() -> None:
     with ScriptedTransport([(STATE_QUERY, corrupt)]) as t:
         with pytest.raises(RigError, match="malformed Magic Home state"):
             MagicHomeLight(t)
+
+
+def state_reply(model: int, firmware: int) -> bytes:
+    body = bytes([0x81, model, 0x23, 0x61, 0x21, 0x06, 0, 0, 0, 0, firmware, 0, 0x0F])
+    return body + bytes([sum(body) & 0xFF])
+
+
+def test_magic_home_picks_the_protocol_from_flux_leds_model_database() -> None:
+    # an RGBCW bulb (0x35) with firmware 7 speaks the 9-byte protocol that turns on by itself;
+    # already on, so no power message; persist: false writes 0x41 instead of 0x31
+    body = bytes([0x41, 0, 0, 0, 0, 255, 0x0F, 0x0F])  # whites only: mode 0F
+    script = [(STATE_QUERY, state_reply(0x35, 7)), (body + bytes([sum(body) & 0xFF]), None)]
+    with ScriptedTransport(script) as t:
+        light = MagicHomeLight(t, persist=False, exclusive_white=True)
+        assert light.protocol.name == "LEDENET_AUTO_ON"
+        light.set_levels({"c": 1.0})
+    # the same bulb from firmware 10 on, and an RGB-only controller, take other messages
+    for model, firmware, protocol in [(0x35, 10, "LEDENET_25_BYTE"), (0x33, 9, "8BYTE")]:
+        with ScriptedTransport([(STATE_QUERY, state_reply(model, firmware))]) as t:
+            with pytest.raises(
+                RigError, match=f"model {model:#04x} .* speaks flux_led's .*{protocol}"
+            ):
+                MagicHomeLight(t)
+
+
+def test_magic_home_without_flux_led_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "flux_led", None)
+    with pytest.raises(MissingDependencyError, match=r"spectral-rig\[flux\]"):
+        MagicHomeLight(ScriptedTransport([]))
 
 
 def test_magic_home_over_a_real_tcp_socket() -> None:
