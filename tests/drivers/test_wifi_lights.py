@@ -3,6 +3,7 @@ through a fake tinytuya device object."""
 
 from __future__ import annotations
 
+import re
 import socket
 import sys
 import threading
@@ -10,6 +11,7 @@ import threading
 import pytest
 
 from core.errors import MissingDependencyError, RigError
+from core.install import install_command
 from drivers.lights.magichome import MagicHomeLight
 from drivers.lights.tuya import TuyaBulb
 from drivers.transports.replay import ScriptedTransport
@@ -95,7 +97,7 @@ def test_magic_home_picks_the_protocol_from_flux_leds_model_database() -> None:
 
 def test_magic_home_without_flux_led_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "flux_led", None)
-    with pytest.raises(MissingDependencyError, match=r"spectral-rig\[flux\]"):
+    with pytest.raises(MissingDependencyError, match=re.escape(install_command("flux"))):
         MagicHomeLight(ScriptedTransport([]))
 
 
