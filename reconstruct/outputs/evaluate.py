@@ -30,6 +30,7 @@ from calibration.colour_difference import (
 from calibration.defaults import colorchecker_reflectances
 from calibration.estimation import noise_free_estimate
 from core.errors import RigError
+from core.files import atomic_output
 from core.lock import output_lock
 from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.model.raycast import RayCaster
@@ -318,6 +319,7 @@ def _evaluate(
         ),
     ]
     ev.files = [str(f) for f in files]
-    np.save(out / RMSE_FILE, rmse)
+    with atomic_output(out / RMSE_FILE) as tmp:
+        np.save(tmp, rmse)
     export.write_report(out / EVALUATION_FILE, asdict(ev))
     return ev
