@@ -32,6 +32,7 @@ from core.config import bounded, from_mapping
 from core.errors import RigError
 from core.files import atomic_output, write_bytes_atomically
 from core.manifest import MANIFEST_FILE, FrameRecord, verify_frames
+from core.manifest_check import check_session
 from core.session import Session
 from reconstruct.frames.raw import read_linear_rgb
 from reconstruct.stages.resumable import run_stage
@@ -263,6 +264,8 @@ def run(conf: DecodeConfig | Mapping[str, Any], session: Session | Path, out_dir
     conf = from_mapping(DecodeConfig, conf, "config", "decode")
     session = Session.of(session)
     root = session.root
+    # what `rig session verify` and `rig capture --resume` refuse, reconstruction refuses too
+    check_session(root, session.frames, root / MANIFEST_FILE)
     inputs = [root / MANIFEST_FILE] + [root / r.path for r in session.frames]
     run_stage("decode", asdict(conf), inputs, out_dir, lambda: _decode(session, conf, out_dir))
     return out_dir
