@@ -15,7 +15,7 @@ import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
-from core import interrupts
+from core import cachedir, interrupts
 from core.errors import RigError
 from core.fserrors import fs_error, underlying_fs_error
 from rig import __version__
@@ -89,6 +89,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parsed: list[argparse.Namespace] = []  # the command line, once parsed
     try:
         interrupts.install()
+        cachedir.direct_library_caches()  # before matplotlib or numba is imported
         try:
             code: int | None = _run(argv, parsed)
         except Exception as error:  # a failure a signal caused is reported as the signal
