@@ -279,6 +279,13 @@ def _evaluate(
             f"expected ({len(gt.vertices)}, {refl.shape[1]})",
             "give one spectrum per vertex of the ground-truth mesh on the reconstruction's grid",
         )
+    bad = np.unique(np.nonzero(~np.isfinite(gt_refl))[0])
+    if bad.size:  # a NaN would make every score NaN and still exit 0
+        raise RigError(
+            f"{gt_reflectance}: {bad.size} of {len(gt_refl)} true spectra hold NaN or inf "
+            f"(first: vertex {bad[0]})",
+            "give a finite reflectance for every vertex of the ground-truth mesh",
+        )
     d_acc, closest, tri = surface_distance(X, gt)
     recon_mesh = trimesh.Trimesh(X, faces, process=False)
     d_comp, _, _ = surface_distance(np.asarray(gt.vertices, dtype=float), recon_mesh)

@@ -100,7 +100,7 @@ def test_validation_errors_name_the_source(w: list[float], v: list[float], messa
 
 
 def test_validate_keeps_signed_values_when_asked() -> None:
-    _, v = validate_spectrum([1, 2, 3, 4], [-1, 0, 1, 2], nonnegative=False)
+    _, v = validate_spectrum([400, 410, 420, 430], [-1, 0, 1, 2], nonnegative=False)
     assert v[:, 0].tolist() == [-1, 0, 1, 2]
 
 
