@@ -112,3 +112,9 @@ def test_second_difference_matrix() -> None:
     np.testing.assert_allclose(d @ x**2, 2)  # curvature 2 everywhere
     with pytest.raises(RigError):
         second_difference_matrix(2)
+
+
+def test_four_even_samples_are_resampled_with_the_spline() -> None:
+    """colour's Sprague interpolator needs six samples (it asserted on an import of four)."""
+    out = resample([400, 500, 600, 700], [1.0, 2.0, 1.0, 1.0])
+    assert out.shape == (31,) and np.all(np.isfinite(out)) and out[10] == 2.0
