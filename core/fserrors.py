@@ -85,7 +85,7 @@ def fs_error(error: OSError, path: str | os.PathLike[str] | None = None) -> RigE
     ``path`` (what the caller was writing). Errors of no known kind keep the system's words."""
     named = error.filename if error.filename not in (None, "") else path
     target = Path(os.fsdecode(named)) if named is not None else None
-    shown = str(target) if target is not None else "a file of this command"
+    shown = str(target) if target is not None else "the files being written"
     code = error.errno
     if code == errno.ENOTDIR and target is not None:
         shown = str(_blocker(target))
@@ -117,5 +117,6 @@ def underlying_fs_error(error: BaseException) -> OSError | None:
         if isinstance(current, OSError) and is_fs_error(current):
             return current
         seen.add(id(current))
-        current = current.__cause__ or current.__context__
+        hidden = current.__suppress_context__  # `raise ... from None`: not a consequence
+        current = current.__cause__ or (None if hidden else current.__context__)
     return None
