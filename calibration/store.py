@@ -333,7 +333,8 @@ class CalibrationStore:
             self._write_index()
         except BaseException:  # the index does not list it: leave no stray file either
             self._entries.remove(entry)
-            path.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):
+                path.unlink(missing_ok=True)
             raise
         return entry
 
@@ -420,13 +421,15 @@ class CalibrationStore:
         ``keep_index``) and the kind folders left empty (:meth:`create_default` failed
         part-way)."""
         for entry in self._entries:
-            (self.root / entry.file).unlink(missing_ok=True)
+            with contextlib.suppress(OSError):
+                (self.root / entry.file).unlink(missing_ok=True)
         self._entries = []
         if keep_index:
             with contextlib.suppress(RigError):  # the failure being reported comes first
                 self._write_index()
         else:
-            self.index_path.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):
+                self.index_path.unlink(missing_ok=True)
         for kind in KINDS:
             with contextlib.suppress(OSError):
                 (self.root / f"{kind}s").rmdir()

@@ -152,7 +152,8 @@ def _acquire(folder: Path, command: str, wait_s: float) -> int:
                     try:
                         _write_holder(fd, command)
                     except OSError as error:  # a full disk: no lock file left behind
-                        path.unlink(missing_ok=True)
+                        with contextlib.suppress(OSError):
+                            path.unlink(missing_ok=True)
                         raise fs_error(error, path) from error
                     return fd
             elif time.monotonic() >= deadline:

@@ -1,7 +1,8 @@
 """Checks of one manifest line before it becomes a FrameRecord: every key of the right type
 and every path inside the session, so a hand-edited or hostile manifest gives one clear
 error (file, line, key, fix) instead of a crash deep in reconstruction or a read outside
-the session."""
+the session; and the checks of the manifest as a whole (:func:`session_problems`) that
+`rig session verify` lists and resume and reconstruction refuse alike."""
 
 from __future__ import annotations
 
