@@ -15,8 +15,9 @@ import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
-from core import interrupts
+from core import cachedir, interrupts
 from core.errors import RigError
+from core.fserrors import fs_error, underlying_fs_error
 from rig import __version__
 
 # Subcommand -> module in rig.commands exposing ``add_parser(subparsers)`` (``-`` -> ``_``).
@@ -89,6 +90,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parsed: list[argparse.Namespace] = []  # the command line, once parsed
     try:
         interrupts.install()
+        cachedir.direct_library_caches()  # before matplotlib or numba is imported
         try:
             code: int | None = _run(argv, parsed)
         except Exception as error:  # a failure a signal caused is reported as the signal
@@ -128,6 +130,9 @@ def _report(error: Exception, parsed: list[argparse.Namespace]) -> int:
     err = Console(stderr=True, soft_wrap=True)
     if debug:
         err.print_exception()
+    cause = underlying_fs_error(error)
+    if cause is not None and not isinstance(error, RigError):  # a full disk: the user's to fix
+        error = fs_error(cause)
     # Text.assemble: `[gphoto2]` or `[/x]` in a message is printed, not taken as markup
     if isinstance(error, RigError):
         err.print(Text.assemble(("error:", "bold red"), " ", str(error)), highlight=False)

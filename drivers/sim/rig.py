@@ -33,6 +33,7 @@ import yaml
 
 from core.config import bounded, from_mapping
 from core.errors import RigError
+from core.files import write_bytes_atomically
 from drivers.sim.ambient import AmbientConfig, room_spd
 from drivers.sim.camera import SensorConfig
 from drivers.sim.members import RigCamera, RigLight, RigProjector, RigSpectrometer
@@ -224,7 +225,7 @@ class SimRig:
                 "target_m": list(self.trajectory.target_m),
             },
         }
-        (folder / "rig.yaml").write_text(yaml.safe_dump(rig, sort_keys=False))
+        write_bytes_atomically(folder / "rig.yaml", yaml.safe_dump(rig, sort_keys=False).encode())
 
     def close(self) -> None:
         for device in (self.light, self.projector, self.camera, self.spectrometer):

@@ -7,6 +7,7 @@ that building the `rig` parser stays fast for every other command.
 from __future__ import annotations
 
 import argparse
+import os
 import re
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -28,7 +29,11 @@ DEFAULT_CAMERA = "Canon EOS 5D Mark II"  # = calibration.defaults.DEFAULT_CAMERA
 def _store_root(args: argparse.Namespace) -> Path:
     from calibration.store import default_store_path
 
-    return output_dir(Path(args.store), "--store") if args.store else default_store_path()
+    if args.store:
+        return output_dir(Path(args.store), "--store")
+    # `$SPECTRAL_RIG_STORE` naming a file gets the same one line as `--store` would
+    return output_dir(default_store_path(), f"${ENV_STORE}" if os.environ.get(ENV_STORE) else
+                      "the default store")
 
 
 def _store(args: argparse.Namespace, *, must_exist: bool = True) -> CalibrationStore:
