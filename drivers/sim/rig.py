@@ -51,6 +51,9 @@ from reconstruct.model.camera import Intrinsics, Pose, write_colmap_text
 from reconstruct.model.render import GroundPlane
 
 
+CARD_THICKNESS_M = 0.001
+
+
 @dataclass(frozen=True)
 class GroundConfig:
     """The ``sim.ground`` section: ``texture`` an (H, W) array or ``.npy`` path in [0, 1];
@@ -247,8 +250,10 @@ def _load_scene(conf: SimConfig, seed: int) -> Scene:
 
 
 def stand_on_ground(scene: Scene) -> Scene:
-    """The scene moved up so its lowest point touches z = 0 (it stands on the ground)."""
-    lift = -float(scene.vertices[:, 2].min())
+    """The scene moved up so its lowest point touches z = 0 (it stands on the ground); a flat
+    scene (the chart) lies on it as a card with a thickness, not in the ground's plane."""
+    z = scene.vertices[:, 2]
+    lift = -float(z.min()) + (CARD_THICKNESS_M if np.ptp(z) == 0 else 0.0)
     return replace(scene, vertices=scene.vertices + np.array([0.0, 0.0, lift]))
 
 
