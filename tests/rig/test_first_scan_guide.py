@@ -4,6 +4,7 @@ comment at the top of the guide), and the profiles' pointers into it land on its
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import subprocess
@@ -44,8 +45,6 @@ def test_every_block_follows_the_convention() -> None:
         assert lang in RUNNABLE + ILLUSTRATIONS, f"block marked {lang!r}:\n{code}"
         if lang == "console":  # a real device's command, never run here
             assert code.startswith("# real hardware"), code
-    runnable = "\n".join(code for lang, code in blocks if lang in RUNNABLE)
-    assert "rig check-chart" not in runnable  # added at merge, with its own test
 
 
 def test_the_profiles_point_to_sections_of_the_guide() -> None:
@@ -105,3 +104,5 @@ def test_every_command_of_the_guide_runs_on_the_sim_rig(tmp_path: Path) -> None:
     assert page.lstrip().lower().startswith("<!doctype html") and "</html>" in page
     assert (work / "first-scan-A.png").stat().st_size > 0
     assert (work / "board.pdf").read_bytes().startswith(b"%PDF")
+    check = json.loads((work / "scans/chart/recon/chart_check/chart_check.json").read_text())
+    assert len(check["patches"]) == 24
