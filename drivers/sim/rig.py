@@ -50,7 +50,6 @@ from drivers.sim.trajectory import (
 from reconstruct.model.camera import Intrinsics, Pose, write_colmap_text
 from reconstruct.model.render import GroundPlane
 
-
 CARD_THICKNESS_M = 0.001
 
 
