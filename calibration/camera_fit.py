@@ -27,6 +27,7 @@ Training sets come from a file or folder in the camspec format of Jiang et al.'s
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -343,6 +344,44 @@ def validate_patches(patch_rgb: np.ndarray, white_level: float | None = None) ->
             "check the exposure and that the lamp was on",
         )
     return y
+
+
+def read_patch_csv(path: str | Path) -> np.ndarray:
+    """One photo's patch values (24, 3) from a CSV of 24 ``R,G,B`` rows in the chart's order (a
+    header row and ``#`` comment lines are skipped; commas, semicolons, tabs or spaces)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
+        raise RigError(
+            f"cannot read patch file {path}: {error}", "give a CSV of R,G,B rows"
+        ) from error
+    rows: list[list[float]] = []
+    header_allowed = True
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        cells = re.split(r"[,;\s]+", line.strip())
+        if not cells[0] or cells[0].startswith("#"):
+            continue
+        try:
+            values = [float(c) for c in cells if c]
+        except ValueError as error:
+            if header_allowed:
+                header_allowed = False
+                continue
+            raise RigError(
+                f"{path}:{lineno}: not a row of numbers ({error})", "give R,G,B values"
+            ) from error
+        header_allowed = False
+        if len(values) != 3:
+            raise RigError(f"{path}:{lineno}: {len(values)} values", "each row holds R,G,B")
+        rows.append(values)
+    if len(rows) != CHART_PATCHES:
+        raise RigError(
+            f"{path} holds {len(rows)} patch rows",
+            f"give {CHART_PATCHES} R,G,B rows, one per ColorChecker patch in the chart's order "
+            "(dark skin … black)",
+        )
+    return np.array(rows)
 
 
 def fit_camera(
