@@ -45,6 +45,8 @@ CAMSPEC_WAVELENGTHS = np.arange(400.0, 721.0, 10.0)
 DEFAULT_COMPONENTS = 4
 MIN_TRAINING_CAMERAS = 5
 CHANNELS = ("R", "G", "B")
+CHART_FIT_METHOD = "chart-fit"
+"""The ``method`` a store entry's provenance names when it was estimated by :func:`fit_camera`."""
 
 
 # -- training set -------------------------------------------------------------------------------
@@ -133,15 +135,21 @@ def read_camspec(path: str | Path, grid: SpectralGrid = DEFAULT_GRID) -> Trainin
 def training_set_from_store(
     store: CalibrationStore, grid: SpectralGrid = DEFAULT_GRID, exclude: tuple[str, ...] = ()
 ) -> TrainingSet:
-    """The latest version of every camera in ``store`` (less ``exclude``) as a training set."""
-    names = [n for n in store.names("camera") if n not in exclude]
+    """The latest version of every *measured* camera in ``store`` (less ``exclude``) as a
+    training set: cameras estimated from a chart (provenance ``method: chart-fit``) are left out,
+    so estimates never become the prior of the next estimate."""
+    names = [
+        e.name
+        for e in store.entries("camera", all_versions=False)
+        if e.name not in exclude and e.provenance.get("method") != CHART_FIT_METHOD
+    ]
     curves = [store.camera(n, grid) for n in names]
     if len(curves) < MIN_TRAINING_CAMERAS:
         raise RigError(
             f"the calibration store {store.root} holds {len(curves)} camera(s) to learn the "
             f"prior from; at least {MIN_TRAINING_CAMERAS} are needed",
             "pass --prior with a file or folder of measured sensitivities (camspec format, e.g. "
-            "Jiang et al.'s database of 28 cameras)",
+            "Jiang et al.'s database)",
         )
     return _checked(TrainingSet(names, _normalised(np.stack(curves)), grid, f"store {store.root}"))
 

@@ -66,10 +66,13 @@ def _provenance(
     lamps: list[str],
     fit: CameraFit,
 ) -> dict[str, Any]:
+    from calibration.camera_fit import CHART_FIT_METHOD
+
     sources = args.from_chart or args.patches
     versions = [f"{n} v{store.entry(n, kind='light').version}" for n in lamps]
     training = fit.prior.training
     return {
+        "method": CHART_FIT_METHOD,
         "source": f"estimated by `rig calibrate camera --from-chart` from {len(sources)} "
         f"ColorChecker {'photo' if args.from_chart else 'patch file'}(s)",
         "photos" if args.from_chart else "patch_files": [str(Path(s).resolve()) for s in sources],

@@ -100,6 +100,20 @@ def test_a_prior_from_store_cameras_needs_enough_of_them(tmp_path: Path) -> None
         training_set_from_store(store)
 
 
+def test_a_store_prior_learns_from_measured_cameras_only(
+    tmp_path: Path, training: TrainingSet
+) -> None:
+    store = CalibrationStore.create_default(tmp_path / "store")
+    for name in training.names[:3]:
+        store.add_camera(name, DEFAULT_GRID.wavelengths, training.sensitivity(name), {})
+    estimate = training.sensitivity(training.names[3])
+    store.add_camera("from a chart", DEFAULT_GRID.wavelengths, estimate, {"method": "chart-fit"})
+    got = training_set_from_store(store, exclude=(training.names[0],))
+    assert len(got.names) == 5 and training.names[0] not in got.names
+    assert "from a chart" not in got.names
+    assert np.allclose(got.sensitivities.max(axis=(1, 2)), 1.0)
+
+
 def test_the_scale_of_the_photos_does_not_change_the_estimate(
     training: TrainingSet, lamps: np.ndarray, chart: np.ndarray
 ) -> None:

@@ -4,7 +4,9 @@ measured camera left out of the prior, under lamps measured into the store."""
 from __future__ import annotations
 
 import re
+import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -64,6 +66,31 @@ def test_a_camera_from_patch_csvs_lands_in_the_store(
     assert prov["lamps"] == [f"{n} v1" for n in LAMPS] and "ESTIMATE" in prov["notes"]
     assert prov["fit"]["prior_cameras"] == 26 and prov["fit"]["patch_error_max_percent"] < 3
     assert (workdir / "my_camera.chart-fit.png").stat().st_size > 20_000
+
+
+def test_raw_photos_go_through_the_chart_reader(
+    workdir: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The RAW path calls ``reconstruct.chart.read_patches(path).rgb`` (the chart reader's
+    interface), here a stand-in returning the CSVs' values."""
+    read: list[Path] = []
+
+    def read_patches(path: Path) -> SimpleNamespace:
+        read.append(path)
+        rgb = np.loadtxt(workdir / f"{path.stem}.csv", delimiter=",", skiprows=2)
+        return SimpleNamespace(rgb=rgb, spread=np.zeros((24, 3)), corners=np.zeros((4, 2)))
+
+    monkeypatch.setitem(
+        sys.modules, "reconstruct.chart", SimpleNamespace(read_patches=read_patches)
+    )
+    args = ["calibrate", "camera", "--from-chart", "photo1.CR2", "photo2.CR2", "--lamp", *LAMPS]
+    assert main([*args, "--name", "raw camera", "--prior", "prior.txt"]) == 0
+    assert read == [Path("photo1.CR2"), Path("photo2.CR2")]
+    store = CalibrationStore(workdir / "store")
+    prov = store.entry("raw camera").provenance
+    assert prov["method"] == "chart-fit" and prov["photos"][0].endswith("photo1.CR2")
+    truth = np.load(workdir / "truth.npy")
+    assert np.sqrt(np.mean((store.camera("raw camera") - truth) ** 2)) < 0.03
 
 
 @pytest.mark.parametrize(
