@@ -200,7 +200,8 @@ class SensitivityPrior:
 
 def build_prior(training: TrainingSet, n_components: int = DEFAULT_COMPONENTS) -> SensitivityPrior:
     """The Gaussian prior of a training set: PCA per channel with ``n_components`` components
-    (Jiang et al. use 2) and the rest of the variance spread evenly (probabilistic PCA)."""
+    (Jiang et al. use 2) and, along every other direction, the variance a held-out camera
+    shows (module docstring)."""
     curves = training.sensitivities
     m, n, _ = curves.shape
     if not 1 <= n_components < min(m - 1, n):
@@ -214,7 +215,9 @@ def build_prior(training: TrainingSet, n_components: int = DEFAULT_COMPONENTS) -
         u, eig = _principal(curves[:, :, c], n_components)
         comps.append(u)
         variances.append(eig)
-        residual.append(_held_out_residual_variance(curves[:, :, c], n_components))
+        # floored so a direction no camera varies in is unlikely, not forbidden
+        held_out = _held_out_residual_variance(curves[:, :, c], n_components)
+        residual.append(max(held_out, 1e-6 * float(eig[0])))
     return SensitivityPrior(
         mean, np.stack(comps), np.stack(variances), np.array(residual), training
     )
@@ -272,7 +275,7 @@ class CameraFit:
     observed: np.ndarray
     prior_distance: np.ndarray
     training_distances: np.ndarray
-    iterations: int
+    evaluations: int
     prior: SensitivityPrior = field(repr=False)
 
     @property
@@ -400,7 +403,7 @@ def fit_camera(
     noise: PatchNoise | None = None,
     *,
     white_level: float | None = None,
-    max_iterations: int = 200,
+    max_evaluations: int = 200,
 ) -> CameraFit:
     """Estimate a camera's sensitivity from chart patch values.
 
@@ -430,7 +433,13 @@ def fit_camera(
     yn = y / photo_scale[:, None, None]
     weight = 1.0 / noise.sigma(yn)
     design = refl[None] * lamps[:, None, :]  # (P, 24, N_λ)
-    solution = _solve(design, yn, weight, prior, max_iterations)
+    solution = _solve(design, yn, weight, prior, max_evaluations)
+    if solution.status == 0:
+        raise RigError(
+            f"the chart fit did not converge in {max_evaluations} evaluations",
+            "check that each photo's lamp is the one named for it and that the patches are in "
+            "the chart's order",
+        )
     s = solution.x[: 3 * n_wl].reshape(3, n_wl).T
     exposure = np.exp(solution.x[3 * n_wl :])
     covariance = np.linalg.pinv(solution.jac.T @ solution.jac)
@@ -447,7 +456,7 @@ def fit_camera(
         training_distances=np.array(
             [_prior_distance(prior, t) for t in prior.training.sensitivities]
         ),
-        iterations=int(solution.nfev),
+        evaluations=int(solution.nfev),
         prior=prior,
     )
 
