@@ -13,6 +13,9 @@ WACV 2013: their PCA of 28 cameras, two components per channel, generalised):
   the training set can still be fitted where the photos say so;
 * the curves are non-negative (bounded least squares);
 * each patch value has a relative plus a floor error (:class:`PatchNoise`);
+* the light may fall off across the chart: per photo a plane over the chart's patch grid
+  (:func:`chart_coordinates`) multiplies the exposure, as in the chart check of
+  ``rig check-chart``, so a lamp at arm's length does not bend the curves;
 * the sensitivity and the exposures (in log, so they stay positive) are solved together by
   bounded Gauss-Newton (scipy's trust-region reflective least squares), from the prior's mean.
 
@@ -271,6 +274,7 @@ class CameraFit:
     sensitivity: np.ndarray
     posterior_std: np.ndarray
     exposure: np.ndarray
+    shading: np.ndarray
     predicted: np.ndarray
     observed: np.ndarray
     prior_distance: np.ndarray
@@ -308,6 +312,7 @@ class CameraFit:
             "patch_error_rms_percent": round(float(np.sqrt(np.mean(err**2))), 3),
             "patch_error_max_percent": round(float(err.max()), 3),
             "patch_angle_mean_deg": round(float(self.patch_angle_deg().mean()), 3),
+            "light_unevenness_percent": round(float(np.ptp(self.shading, axis=1).max() * 100), 1),
             "prior_distance_rgb": ", ".join(f"{d:.2f}" for d in self.prior_distance),
             "prior_distance_training_median": round(float(np.median(self.training_distances)), 2),
             "prior_components": self.prior.n_components,
@@ -403,7 +408,7 @@ def fit_camera(
     noise: PatchNoise | None = None,
     *,
     white_level: float | None = None,
-    max_evaluations: int = 200,
+    max_evaluations: int = 1000,
 ) -> CameraFit:
     """Estimate a camera's sensitivity from chart patch values.
 
@@ -441,15 +446,18 @@ def fit_camera(
             "the chart's order",
         )
     s = solution.x[: 3 * n_wl].reshape(3, n_wl).T
-    exposure = np.exp(solution.x[3 * n_wl :])
+    exposure = np.exp(solution.x[3 * n_wl : 3 * n_wl + n_photos])
+    slopes = solution.x[3 * n_wl + n_photos :].reshape(2, n_photos).T
+    shading = 1.0 + slopes @ chart_coordinates().T
     covariance = np.linalg.pinv(solution.jac.T @ solution.jac)
     post_std = np.sqrt(np.diag(covariance)[: 3 * n_wl]).reshape(3, n_wl).T
     peak = float(s.max())
-    predicted = np.einsum("pin,nc->pic", design, s) * exposure[:, None, None]
+    predicted = np.einsum("pin,nc->pic", design, s) * (exposure[:, None] * shading)[:, :, None]
     return CameraFit(
         sensitivity=s / peak,
         posterior_std=post_std / peak,
         exposure=exposure * peak * photo_scale,
+        shading=shading,
         predicted=predicted * photo_scale[:, None, None],
         observed=y,
         prior_distance=_prior_distance(prior, s / peak),
@@ -461,6 +469,13 @@ def fit_camera(
     )
 
 
+def chart_coordinates() -> np.ndarray:
+    """Each patch's centre (24, 2) as (column, row) in patch pitches from the chart's centre:
+    the classic chart's 4 rows of 6, in reading order."""
+    index = np.arange(CHART_PATCHES)
+    return np.column_stack([index % 6 - 2.5, index // 6 - 1.5])
+
+
 def _solve(
     design: np.ndarray,
     yn: np.ndarray,
@@ -468,45 +483,66 @@ def _solve(
     prior: SensitivityPrior,
     max_evaluations: int,
 ) -> OptimizeResult:
-    """The MAP estimate of (S, log k) by bounded Gauss-Newton (trust region reflective), from the
-    prior's mean and the exposures that fit it best. The unknowns are S channel by channel
-    (3 N_λ) then log k per photo (P); exposures in log so they stay positive."""
+    """The MAP estimate by bounded Gauss-Newton (trust region reflective), from the prior's mean
+    and the exposures that fit it best. The unknowns: S channel by channel (3 N_λ), then per
+    photo log k (exposures stay positive), then the light's slope across the chart along the
+    columns and the rows (P each)."""
     n_photos, _, n_wl = design.shape
-    whitening = np.zeros((3 * n_wl, 3 * n_wl))
+    ns = 3 * n_wl
+    whitening = np.zeros((ns, ns))
     for c in range(3):
         whitening[c * n_wl : (c + 1) * n_wl, c * n_wl : (c + 1) * n_wl] = prior.whitening(c)
     mean = prior.mean.T.ravel()
+    uv = chart_coordinates()
 
-    def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return x[: 3 * n_wl].reshape(3, n_wl).T, np.exp(x[3 * n_wl :])
+    def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """S (N_λ, 3), k (P,), the unshaded prediction (P, 24, 3) and the shading (P, 24)."""
+        s = x[:ns].reshape(3, n_wl).T
+        k = np.exp(x[ns : ns + n_photos])
+        slopes = x[ns + n_photos :].reshape(2, n_photos).T
+        shading = k[:, None] * (1.0 + slopes @ uv.T)
+        return s, k, np.einsum("pin,nc->pic", design, s), shading
 
     def residuals(x: np.ndarray) -> np.ndarray:
-        s, k = unpack(x)
-        pred = np.einsum("pin,nc->pic", design, s) * k[:, None, None]
-        return np.concatenate([(weight * (pred - yn)).ravel(), whitening @ (x[: 3 * n_wl] - mean)])
+        _, _, base, shading = unpack(x)
+        data = weight * (base * shading[:, :, None] - yn)
+        return np.concatenate([data.ravel(), whitening @ (x[:ns] - mean)])
 
     def jacobian(x: np.ndarray) -> np.ndarray:
-        s, k = unpack(x)
-        pred = np.einsum("pin,nc->pic", design, s) * k[:, None, None]
-        jac = np.zeros((yn.size + 3 * n_wl, x.size))
+        _, k, base, shading = unpack(x)
+        jac = np.zeros((yn.size + ns, x.size))
         data = jac[: yn.size].reshape(n_photos, CHART_PATCHES, 3, x.size)
         for c in range(3):
-            block = weight[:, :, c, None] * k[:, None, None] * design
+            block = (weight[:, :, c] * shading)[:, :, None] * design
             data[:, :, c, c * n_wl : (c + 1) * n_wl] = block
         for p in range(n_photos):
-            data[p, :, :, 3 * n_wl + p] = weight[p] * pred[p]
-        jac[yn.size :, : 3 * n_wl] = whitening
+            data[p, :, :, ns + p] = weight[p] * base[p] * shading[p, :, None]
+            for axis in range(2):
+                column = ns + (1 + axis) * n_photos + p
+                data[p, :, :, column] = weight[p] * base[p] * (k[p] * uv[:, axis])[:, None]
+        jac[yn.size :, :ns] = whitening
         return jac
 
     pred0 = np.einsum("pin,nc->pic", design, prior.mean)
     k0 = np.sum(weight**2 * pred0 * yn, axis=(1, 2)) / np.sum(weight**2 * pred0**2, axis=(1, 2))
-    x0 = np.concatenate([np.clip(mean, 1e-9, None), np.log(k0)])
-    lower = np.concatenate([np.zeros(3 * n_wl), np.full(n_photos, -np.inf)])
+    x0 = np.concatenate([np.clip(mean, 1e-9, None), np.log(k0), np.zeros(2 * n_photos)])
+    # slopes bounded so the light stays positive over the whole chart
+    lower = np.concatenate(
+        [
+            np.zeros(ns),
+            np.full(n_photos, -np.inf),
+            np.full(n_photos, -0.19),
+            np.full(n_photos, -0.33),
+        ]
+    )
+    upper = np.concatenate(
+        [np.full(ns + n_photos, np.inf), np.full(n_photos, 0.19), np.full(n_photos, 0.33)]
+    )
     return least_squares(
         residuals,
         x0,
         jac=jacobian,
-        bounds=(lower, np.inf),
+        bounds=(lower, upper),
         method="trf",
         x_scale="jac",
         max_nfev=max_evaluations,

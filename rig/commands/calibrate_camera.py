@@ -110,7 +110,8 @@ def _print_fit(fit: CameraFit, names: list[str], sources: list[str]) -> None:
     summary = fit.summary()
     console.print(
         f"residual RMS {summary['patch_error_rms_percent']} %, max "
-        f"{summary['patch_error_max_percent']} %, mean angle {summary['patch_angle_mean_deg']}°"
+        f"{summary['patch_error_max_percent']} %, mean angle {summary['patch_angle_mean_deg']}°; "
+        f"the light varies by {summary['light_unevenness_percent']} % across the chart"
     )
     console.print(
         f"distance from the prior's mean (R, G, B): {summary['prior_distance_rgb']} "

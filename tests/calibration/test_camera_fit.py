@@ -13,6 +13,7 @@ from calibration.camera_fit import (
     PatchNoise,
     TrainingSet,
     build_prior,
+    chart_coordinates,
     fit_camera,
     read_camspec,
     simulate_patches,
@@ -92,6 +93,19 @@ def test_a_held_out_camera_is_recovered_from_noisy_patches_under_one_lamp(
         errors.append(rmse(fit.sensitivity, truth))
         assert np.all(fit.posterior_std > 0)
     assert max(errors) < 0.035  # measured 0.021-0.024
+
+
+def test_light_falling_off_across_the_chart_is_fitted_not_bent_into_the_curves(
+    training: TrainingSet, lamps: np.ndarray, chart: np.ndarray
+) -> None:
+    truth = training.sensitivity(HELD_OUT)
+    prior = build_prior(training.without(HELD_OUT))
+    falloff = 1.0 + chart_coordinates() @ np.array([0.05, -0.08])  # 0.755 to 1.245
+    patches = simulate_patches(truth, lamps, chart) * falloff[None, :, None]
+    fit = fit_camera(patches, lamps, chart, prior)
+    assert fit.shading == pytest.approx(np.stack([falloff, falloff]), abs=0.01)
+    assert rmse(fit.sensitivity, truth) < 0.02  # as with even light
+    assert fit.summary()["light_unevenness_percent"] == pytest.approx(49.0, abs=1.0)
 
 
 def test_a_prior_from_store_cameras_needs_enough_of_them(tmp_path: Path) -> None:
