@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 from core.errors import RigError
 from rig import wizard
+from rig.commands import calibrate_camera
 from rig.outpaths import output_dir, output_file
 
 if TYPE_CHECKING:
@@ -341,6 +342,11 @@ def cmd_select(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- camera from a chart -------------------------------------------------------------------------
+def cmd_camera(args: argparse.Namespace) -> int:
+    return calibrate_camera.run(args, _store(args))
+
+
 # -- parser -------------------------------------------------------------------------------------
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -414,6 +420,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--top", type=int, default=15, help="rows to print and plot")
     p.add_argument("--plot", metavar="PNG", default="illumination-selection.png")
     p.set_defaults(func=cmd_select)
+
+    calibrate_camera.add_parser(sub, common, cmd_camera)
 
     p = sub.add_parser("init-store", parents=[common], help="write the built-in default store")
     p.add_argument("dir", nargs="?", help="directory (default: --store or the default store)")
