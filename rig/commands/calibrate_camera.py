@@ -81,9 +81,8 @@ def _provenance(
         "prior": f"{len(training.names)} cameras from {training.source}, "
         f"{fit.prior.n_components} components per channel",
         "fit": fit.summary(),
-        "notes": "ESTIMATE from a chart, not a measurement: leave-one-camera-out over 27 "
-        "measured cameras the curves are off by an RMSE of about 0.04 (one lamp) or 0.035 "
-        "(two lamps) of the peak (bench/camera_from_chart.py)",
+        "notes": "ESTIMATE from a chart, not a measurement: its typical error, leave-one-camera-"
+        "out over measured cameras, is in bench/README.md (camera_from_chart)",
     }
 
 
