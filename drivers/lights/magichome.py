@@ -3,9 +3,12 @@
 The bytes come from flux_led (extra ``flux``), the maintained implementation of the protocol:
 its protocol classes build and check every message, and its model database says which protocol
 a device speaks, from the model number and firmware version in the state reply. This driver
-writes the five-channel 9-byte LEDENET levels message over the project's own transport (so the
-tests script it byte by byte) and refuses devices that speak another protocol. Channel ``w`` is
-warm white, ``c`` cool white. See docs/protocols/magic-home.md.
+writes levels over the project's own transport (so the tests script it byte by byte) in the
+five-channel 9-byte LEDENET message, or in the 25-byte one of newer RGBCW bulbs (colour as HSV
+in whole percent, white as a temperature and a brightness: coarser, but an illumination is a
+fixed setting whose spectrum is measured, so only repeatability matters), and refuses devices
+that speak another protocol. Channel ``w`` is warm white, ``c`` cool white. See
+docs/protocols/magic-home.md.
 """
 
 from __future__ import annotations
@@ -25,10 +28,10 @@ PORT = 5577
 CHANNELS = ("r", "g", "b", "c", "w")
 
 
-def nine_byte_protocols() -> tuple[ProtocolLEDENET9Byte, ...]:
-    """flux_led's 9-byte LEDENET protocols, the plain one first: their levels message carries
-    the five channels r, g, b, warm white and cool white, and their state query and 14-byte
-    reply are those of every LEDENET device with a checksum."""
+def five_channel_protocols() -> tuple[ProtocolLEDENET9Byte, ...]:
+    """flux_led's LEDENET protocols whose levels message carries the five channels r, g, b,
+    warm white and cool white, the plain 9-byte one first; their state query and 14-byte reply
+    are those of every LEDENET device with a checksum."""
     try:
         from flux_led import protocol
     except ImportError as error:
@@ -37,6 +40,7 @@ def nine_byte_protocols() -> tuple[ProtocolLEDENET9Byte, ...]:
         protocol.ProtocolLEDENET9Byte,
         protocol.ProtocolLEDENET9ByteAutoOn,
         protocol.ProtocolLEDENET9ByteDimmableEffects,
+        protocol.ProtocolLEDENET25Byte,
     )
     # flux_led marks methods @abstractmethod without ABCMeta; it instantiates these itself
     return tuple(cls() for cls in classes)  # type: ignore[abstract]
@@ -44,16 +48,16 @@ def nine_byte_protocols() -> tuple[ProtocolLEDENET9Byte, ...]:
 
 def protocol_for(model_num: int, firmware: int) -> ProtocolLEDENET9Byte:
     """The protocol flux_led's model database gives this device (models it does not know are
-    taken to be 9-byte controllers); a RigError unless it is a 9-byte one."""
+    taken to be 9-byte controllers); a RigError unless its levels carry the five channels."""
     from flux_led.models_db import get_model
 
-    supported = {protocol.name: protocol for protocol in nine_byte_protocols()}
+    supported = {protocol.name: protocol for protocol in five_channel_protocols()}
     model = get_model(model_num, next(iter(supported)))
     name = model.protocol_for_version_num(firmware)
     if name not in supported:
         raise RigError(
             f"Magic Home model {model_num:#04x} ({model.description}, firmware {firmware}) "
-            f"speaks flux_led's {name} protocol, not the 5-channel 9-byte one this driver writes",
+            f"speaks flux_led's {name} protocol, not a five-channel one this driver writes",
             "use a five-channel (RGB/WW/CW) LEDENET controller, or driver `manual`",
         )
     return supported[name]
@@ -104,7 +108,7 @@ class MagicHomeLight(LightBase):
         if exclusive_white:
             for name, levels in self.illuminations.items():
                 self._check_exclusive(levels, f"illumination {name!r}")
-        self.protocol = nine_byte_protocols()[0]
+        self.protocol = five_channel_protocols()[0]
         self.state = self.query_state()
         self.protocol = protocol_for(int(self.state["model_num"], 16), self.state["firmware"])
         self._powered = self.state["power"] == "on"
