@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from core.errors import RigError
+from core.install import install_command
 from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.model.render import vertex_normals
 
@@ -63,7 +64,7 @@ def mitsuba(variant: str | None = None) -> Any:
     except ImportError as exc:
         raise RigError(
             "the external-renderer benchmark needs Mitsuba 3 (not installed)",
-            "pip install 'spectral-rig[external]'",
+            install_command("external"),
         ) from exc
     for name in names:
         try:

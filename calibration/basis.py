@@ -15,6 +15,7 @@ import numpy as np
 from calibration.defaults import training_reflectances
 from calibration.grid import DEFAULT_GRID, SpectralGrid
 from core.errors import RigError
+from core.files import atomic_output
 
 
 @dataclass
@@ -46,7 +47,7 @@ class SpectralBasis:
         """Write ``.npz`` (B, wavelengths_nm, explained_variance, source)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        with open(path, "wb") as handle:
+        with atomic_output(path) as tmp, open(tmp, "wb") as handle:
             np.savez(
                 handle,
                 B=self.B,

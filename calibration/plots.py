@@ -13,6 +13,7 @@ import numpy as np
 
 from calibration.basis import SpectralBasis
 from calibration.selection import SubsetScore
+from core.files import atomic_output
 
 RGB_COLOURS = ("tab:red", "tab:green", "tab:blue")
 
@@ -21,8 +22,11 @@ def _save(fig: plt.Figure, path: str | Path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    try:
+        with atomic_output(path) as tmp:  # a full disk leaves no truncated plot
+            fig.savefig(tmp, dpi=120)
+    finally:
+        plt.close(fig)
     return path
 
 

@@ -42,12 +42,20 @@ class SubsetScore:
     smoothness: float
 
 
-def normalised_responses(camera: np.ndarray, spds: list[np.ndarray]) -> np.ndarray:
+def normalised_responses(
+    camera: np.ndarray, spds: list[np.ndarray], names: list[str] | None = None
+) -> np.ndarray:
     """``Cᵀ diag(L_k)`` scaled so a perfect white reads 1.0 in its brightest channel."""
     resp = response_matrices(camera, spds)
     white = resp.sum(axis=2).max(axis=1)
-    if np.any(white <= 0):
-        raise RigError("a candidate illumination gives no camera signal", "check its SPD")
+    bad = [i for i, w in enumerate(white) if not (np.isfinite(w) and w > 0)]
+    if bad:
+        name = f"illumination {names[bad[0]]!r}" if names else "a candidate illumination"
+        what = "no" if np.isfinite(white[bad[0]]) else "an overflowing"
+        raise RigError(
+            f"{name} gives {what} camera signal on 400–700 nm",
+            "check its SPD (values, unit, wavelength range) and import it again",
+        )
     return resp / white[:, None, None]
 
 
@@ -94,15 +102,22 @@ def rank_illumination_sets(
             f"{len(names)} candidates give {total} subsets of size ≤ {max_size}",
             f"lower --max-size or the number of candidates (limit {MAX_SUBSETS})",
         )
-    resp = normalised_responses(camera, [np.asarray(candidates[n]) for n in names])
+    resp = normalised_responses(camera, [np.asarray(candidates[n]) for n in names], names)
     weights = SMOOTHNESS_GRID if smoothness is None else (smoothness,)
     scores = []
     for k in range(1, max_size + 1):
         for combo in itertools.combinations(range(len(names)), k):
-            tries = [
-                (expected_rmse(resp[list(combo)], reflectances, basis, noise, sm), sm)
-                for sm in weights
-            ]
+            try:
+                tries = [
+                    (expected_rmse(resp[list(combo)], reflectances, basis, noise, sm), sm)
+                    for sm in weights
+                ]
+            except np.linalg.LinAlgError as error:
+                raise RigError(
+                    f"the illuminations {' + '.join(names[i] for i in combo)} give no usable "
+                    f"estimate ({error})",
+                    "check their SPDs, or give a positive --smoothness",
+                ) from error
             rmse, best = min(tries, key=lambda t: float(t[0].mean()))
             scores.append(
                 SubsetScore(

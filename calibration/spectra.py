@@ -4,9 +4,11 @@ Every spectrum entering spectral-rig (a spectrometer export, a camera sensitivit
 colour-science dataset) goes through :func:`resample`, so one place decides what counts as a
 valid spectrum and how it is brought onto the grid:
 
-* wavelengths must be finite, strictly increasing (no duplicates) and cover the grid;
-* values must be finite; with ``nonnegative=True`` (power, sensitivity, reflectance) values below
-  ``-5 %`` of the peak are an error, smaller negatives are dark-subtraction noise and become 0;
+* wavelengths must be finite, in nanometres (within 100–3000 nm: a µm export is refused),
+  strictly increasing (no duplicates) and cover the grid;
+* values must be finite and within ±1e15; with ``nonnegative=True`` (power, sensitivity,
+  reflectance) values below ``-5 %`` of the peak are an error, smaller negatives are
+  dark-subtraction noise and become 0;
 * interpolation is colour-science's: a :class:`colour.MultiSpectralDistributions` evaluated at
   the grid wavelengths with the interpolator its ``interpolate``/``align`` picks (Sprague 1880
   for evenly spaced data, cubic spline otherwise);
@@ -31,6 +33,14 @@ NEGATIVE_TOLERANCE = 0.05
 """Negative values down to this fraction of the peak are treated as noise and clipped to 0."""
 
 MIN_SAMPLES = 4
+SPRAGUE_MIN_SAMPLES = 6  # colour's Sprague interpolator needs six; fewer take the cubic spline
+
+WAVELENGTH_RANGE_NM = (100.0, 3000.0)
+"""Wavelengths outside this are no spectrometer's (µm or Å exports, a shifted column)."""
+
+MAX_MAGNITUDE = 1e15
+"""Largest absolute value accepted: any radiometric unit or count fits, and products of such
+values stay far from float64's overflow (an SPD of 1e308 made every solve singular)."""
 
 
 def validate_spectrum(
@@ -69,6 +79,18 @@ def validate_spectrum(
         )
     if not np.all(np.isfinite(w)):
         raise RigError(f"{source}: wavelengths contain NaN or inf", "remove or fix those rows")
+    low, high = WAVELENGTH_RANGE_NM
+    if np.max(np.abs(w)) <= 10.0:
+        raise RigError(
+            f"{source}: wavelengths {w.min():g}–{w.max():g} look like micrometres",
+            "convert them to nanometres (multiply by 1000) and import again",
+        )
+    if w.min() < low or w.max() > high:
+        raise RigError(
+            f"{source}: wavelengths {w.min():g}–{w.max():g} are outside "
+            f"{low:g}–{high:g} nm",
+            "give the wavelength column in nanometres",
+        )
     steps = np.diff(w)
     if np.any(steps == 0):
         dup = w[1:][steps == 0][0]
@@ -87,6 +109,13 @@ def validate_spectrum(
         raise RigError(
             f"{source}: value is NaN or inf at {w[row]:g} nm",
             "re-export the measurement or remove the broken rows",
+        )
+    if np.max(np.abs(v)) > MAX_MAGNITUDE:
+        row = int(np.argwhere(np.abs(v) > MAX_MAGNITUDE)[0, 0])
+        raise RigError(
+            f"{source}: value {v[row].max():g} at {w[row]:g} nm is outside the allowed range "
+            f"±{MAX_MAGNITUDE:g}",
+            "re-export the measurement in a unit that keeps values within that range",
         )
     if nonnegative:
         peak = np.max(np.abs(v), axis=0)
@@ -129,7 +158,7 @@ def _interpolate(w: np.ndarray, v: np.ndarray, target: np.ndarray) -> np.ndarray
     the grid points then fall between its samples.
     """
     msds = colour.MultiSpectralDistributions(v, w, labels=[f"c{j}" for j in range(v.shape[1])])
-    uniform = msds.is_uniform()
+    uniform = msds.is_uniform() and w.size >= SPRAGUE_MIN_SAMPLES
     msds.interpolator = colour.SpragueInterpolator if uniform else colour.CubicSplineInterpolator
     return np.asarray(msds[np.clip(target, w[0], w[-1])], dtype=float).reshape(target.size, -1)
 

@@ -16,6 +16,7 @@ atomically (temporary file, fsync, rename); every change re-reads it under the s
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import datetime as _dt
 import hashlib
@@ -35,6 +36,7 @@ from calibration import defaults
 from calibration.grid import DEFAULT_GRID, SpectralGrid
 from calibration.spectra import resample, validate_spectrum
 from core.errors import RigError
+from core.files import write_bytes_atomically
 from core.lock import locked
 from core.yamlio import load_yaml, yaml_problem
 
@@ -80,15 +82,6 @@ def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8", newline="") as handle:
-        handle.write(text)
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(tmp, path)
-
-
 def write_spectrum_csv(
     path: Path, wavelengths: np.ndarray, values: np.ndarray, columns: list[str]
 ) -> None:
@@ -97,7 +90,7 @@ def write_spectrum_csv(
     for w, row in zip(wavelengths, np.atleast_2d(values.T).T, strict=True):
         lines.append(",".join([f"{w:.6g}", *(f"{x:.9g}" for x in np.atleast_1d(row))]))
     path.parent.mkdir(parents=True, exist_ok=True)
-    _atomic_write(path, "\n".join(lines) + "\n")
+    write_bytes_atomically(path, ("\n".join(lines) + "\n").encode("utf-8"))
 
 
 def read_spectrum_csv(path: Path, columns: list[str]) -> tuple[np.ndarray, np.ndarray]:
@@ -205,7 +198,8 @@ class CalibrationStore:
     def _write_index(self) -> None:
         self.root.mkdir(parents=True, exist_ok=True)
         data = {"format": FORMAT, "entries": [asdict(e) for e in self._entries]}
-        _atomic_write(self.index_path, yaml.safe_dump(data, sort_keys=False, allow_unicode=True))
+        text = yaml.safe_dump(data, sort_keys=False, allow_unicode=True)
+        write_bytes_atomically(self.index_path, text.encode("utf-8"))
 
     # -- queries ---------------------------------------------------------------------------
     def entries(self, kind: str | None = None, *, all_versions: bool = True) -> list[Entry]:
@@ -335,7 +329,13 @@ class CalibrationStore:
             provenance=prov,
         )
         self._entries.append(entry)
-        self._write_index()
+        try:
+            self._write_index()
+        except BaseException:  # the index does not list it: leave no stray file either
+            self._entries.remove(entry)
+            with contextlib.suppress(OSError):
+                path.unlink(missing_ok=True)
+            raise
         return entry
 
     def add_light(
@@ -408,8 +408,31 @@ class CalibrationStore:
                 raise RigError(
                     f"{store.root} already holds a calibration store", "choose an empty directory"
                 )
-            store._add_defaults(grid)
+            had_index = store.index_path.exists()
+            try:
+                store._add_defaults(grid)
+            except BaseException:  # a full disk midway: leave no half store behind
+                store._discard_written(keep_index=had_index)
+                raise
         return store
+
+    def _discard_written(self, keep_index: bool) -> None:
+        """Remove every entry's file this store object wrote, the index (rewritten empty when
+        ``keep_index``) and the kind folders left empty (:meth:`create_default` failed
+        part-way)."""
+        for entry in self._entries:
+            with contextlib.suppress(OSError):
+                (self.root / entry.file).unlink(missing_ok=True)
+        self._entries = []
+        if keep_index:
+            with contextlib.suppress(RigError):  # the failure being reported comes first
+                self._write_index()
+        else:
+            with contextlib.suppress(OSError):
+                self.index_path.unlink(missing_ok=True)
+        for kind in KINDS:
+            with contextlib.suppress(OSError):
+                (self.root / f"{kind}s").rmdir()
 
     def _add_defaults(self, grid: SpectralGrid) -> None:
         """The built-in camera sensitivities, bulb channel models and their mixes."""

@@ -22,7 +22,9 @@ class MissingDependencyError(RigError):
     """An optional package or system library needed for a device is not installed."""
 
     def __init__(self, package: str, extra: str | None = None, why: str = "") -> None:
-        install = f"pip install 'spectral-rig[{extra}]'" if extra else f"pip install {package}"
+        from core.install import install_command  # only when raised: keeps start-up light
+
+        install = install_command(extra) if extra else f"pip install {package}"
         super().__init__(
             f"{package} is not installed{': ' + why if why else ''}", f"install it with `{install}`"
         )

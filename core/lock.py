@@ -15,6 +15,7 @@ Linux and macOS only: Windows has no ``flock`` and is not a target of the projec
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import errno
 import fcntl
@@ -30,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from core.errors import RigError
+from core.fserrors import fs_error
 from core.session import SESSION_FILE
 
 LOCK_FILE = ".lock"
@@ -147,7 +149,12 @@ def _acquire(folder: Path, command: str, wait_s: float) -> int:
         try:
             if _try_lock(fd, path):
                 if _is_current(fd, path):
-                    _write_holder(fd, command)
+                    try:
+                        _write_holder(fd, command)
+                    except OSError as error:  # a full disk: no lock file left behind
+                        with contextlib.suppress(OSError):
+                            path.unlink(missing_ok=True)
+                        raise fs_error(error, path) from error
                     return fd
             elif time.monotonic() >= deadline:
                 raise _in_use(folder, _read_holder(fd))
@@ -200,8 +207,7 @@ def locked(
 
     Another holder makes this raise :class:`InUse` at once, or after ``wait_s`` seconds of
     waiting for it. ``create`` makes a missing folder and its missing parents (removed again
-    if left empty);
-    otherwise a missing folder is a RigError."""
+    if left empty); otherwise a missing folder is a RigError."""
     folder = Path(folder).expanduser().absolute()
     key = folder.resolve()  # one hold whichever link or relative path names the folder
     holds = _holds()
@@ -217,7 +223,7 @@ def locked(
     try:
         hold = _Hold(_acquire(folder, command, wait_s), 1, created)
     except BaseException:
-        _remove_empty(created)
+        _remove_empty(created)  # never raises: the refusal matters, not this tidying
         raise
     holds[key] = hold
     try:

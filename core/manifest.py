@@ -3,6 +3,7 @@ frame's file is durable; read back with every line checked (:mod:`core.manifest_
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -13,7 +14,8 @@ from typing import Any
 
 from core.errors import RigError
 from core.files import sha256_file
-from core.manifest_check import check_line
+from core.fserrors import fs_error
+from core.manifest_check import LINK_FIX, check_line, leads_out
 
 log = logging.getLogger(__name__)
 
@@ -61,12 +63,25 @@ def record_paths(record: FrameRecord) -> list[str]:
 
 
 def append_manifest(session_dir: Path, record: FrameRecord) -> None:
-    """Append one line and fsync it; called only after the frame's file is durable."""
+    """Append one line and fsync it; called only after the frame's file is durable. A failed
+    write (a full disk) is cut off again, so no torn line is left behind."""
     path = session_dir / MANIFEST_FILE
-    with open(path, "a", encoding="utf-8") as handle:
-        handle.write(record.to_json() + "\n")
-        handle.flush()
-        os.fsync(handle.fileno())
+    line = memoryview((record.to_json() + "\n").encode("utf-8"))
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    except OSError as error:
+        raise fs_error(error, path) from error
+    start = os.fstat(fd).st_size
+    try:
+        while line:
+            line = line[os.write(fd, line) :]
+        os.fsync(fd)
+    except OSError as error:
+        with contextlib.suppress(OSError):
+            os.ftruncate(fd, start)
+        raise fs_error(error, path) from error
+    finally:
+        os.close(fd)
 
 
 def read_manifest(session_dir: Path, n_views: int | None = None) -> list[FrameRecord]:
@@ -74,8 +89,15 @@ def read_manifest(session_dir: Path, n_views: int | None = None) -> list[FrameRe
     A torn last line (a kill mid-append) is ignored with a warning — its frame is simply
     captured again on resume."""
     path = session_dir / MANIFEST_FILE
-    if not path.is_file():
+    if not os.path.lexists(path):
         return []
+    if leads_out(session_dir, path):
+        raise RigError(f"{path} is a link out of the session", LINK_FIX)
+    if not path.is_file():
+        raise RigError(
+            f"{path} is not a file (a folder or a device)",
+            "move it away and restore the session's manifest from a backup",
+        )
     records: list[FrameRecord] = []
     lines = path.read_bytes().split(b"\n")
     for number, line in enumerate(lines, 1):
@@ -112,11 +134,14 @@ class FrameProblem:
 
 
 def verify_frames(session_dir: Path, records: Iterable[FrameRecord]) -> list[FrameProblem]:
-    """Re-hash every frame; report missing files and mismatching hashes."""
+    """Re-hash every frame; report missing files, mismatching hashes and files that lead out
+    of the session (never read)."""
     problems = []
     for record in records:
         file = session_dir / record.path
-        if not file.is_file():
+        if os.path.lexists(file) and leads_out(session_dir, file):
+            problems.append(FrameProblem(record, "link out"))
+        elif not file.is_file():
             problems.append(FrameProblem(record, "missing"))
         elif sha256_file(file) != record.sha256:
             problems.append(FrameProblem(record, "hash mismatch"))

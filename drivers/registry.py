@@ -157,9 +157,19 @@ def _sim(kind: str) -> Factory:
     return make
 
 
+PLACEHOLDER = "REPLACE-WITH-"  # how shipped profiles mark a value only the user can know
+
+
 def _tuya(driver: str, options: dict[str, Any], devices: DeviceSet) -> Any:
     from drivers.lights.tuya import TuyaBulb, open_bulb
 
+    for key in ("device_id", "local_key"):
+        if str(options.get(key, "")).startswith(PLACEHOLDER):
+            raise RigError(
+                f"tuya light: {key} is still the shipped placeholder {options[key]!r}",
+                "get the bulb's device id and local key with `python -m tinytuya wizard` "
+                "(docs/first-scan.md#tuya-and-smart-life-bulbs) and put them in the profile",
+            )
     host = _transport_section(options).get("host")
     if host and "address" not in options:
         options["address"] = host

@@ -15,12 +15,13 @@ import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
-from core import interrupts
+from core import cachedir, interrupts
 from core.errors import RigError
+from core.fserrors import fs_error, underlying_fs_error
 from core.text import printable
 from rig import __version__
 
-# Subcommand -> module in rig.commands exposing ``add_parser(subparsers)``.
+# Subcommand -> module in rig.commands exposing ``add_parser(subparsers)`` (``-`` -> ``_``).
 COMMANDS: tuple[str, ...] = (
     "demo",
     "devices",
@@ -30,6 +31,7 @@ COMMANDS: tuple[str, ...] = (
     "reconstruct",
     "relight",
     "evaluate",
+    "check-chart",
     "board",
     "batch",
     "view",
@@ -60,7 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
-        module = importlib.import_module(f"rig.commands.{name}")
+        module = importlib.import_module(f"rig.commands.{name.replace('-', '_')}")
         module.add_parser(subparsers)
     return parser
 
@@ -98,6 +100,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parsed: list[argparse.Namespace] = []  # the command line, once parsed
     try:
         interrupts.install()
+        cachedir.direct_library_caches()  # before matplotlib or numba is imported
         try:
             code: int | None = _run(argv, parsed)
         except Exception as error:  # a failure a signal caused is reported as the signal
@@ -137,6 +140,9 @@ def _report(error: Exception, parsed: list[argparse.Namespace]) -> int:
     err = Console(stderr=True, soft_wrap=True)
     if debug:
         err.print_exception()
+    cause = underlying_fs_error(error)
+    if cause is not None and not isinstance(error, RigError):  # a full disk: the user's to fix
+        error = fs_error(cause)
     # Text.assemble: `[gphoto2]` or `[/x]` in a message is printed, not taken as markup;
     # printable: a newline or escape sequence in a name does not break the one line
     if isinstance(error, RigError):

@@ -21,11 +21,14 @@ import os
 import subprocess
 import sys
 import tempfile
-from contextlib import nullcontext
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import yaml
 from rich.console import Console
+
+from rig.progress_lines import ProgressLines
 
 KERNEL_MODULES = (
     "reconstruct.optimise.kernels.cg",
@@ -39,6 +42,7 @@ KERNEL_MODULES = (
 )
 STAMP_FILE = "spectral-rig-warmup.json"
 TIMEOUT_S = 1800
+PROGRESS_EVERY_S = 30.0
 CHILD = [sys.executable, "-m", "rig.warmup"]
 # The tiny capture: bench.real_size's smoke size (every stage, every optimiser step runs)
 _CAMERA = {"width": 320, "height": 240, "focal_px": 400.0}
@@ -98,13 +102,12 @@ def compile_kernels_once(console: Console | None = None, command: list[str] | No
         "compiling the numerical kernels once for this install (a tiny simulated "
         "reconstruction in a separate process, 1–3 min), so that this run only loads them"
     )
-    if console is not None:  # a line that stays in logs, and a spinner on a terminal
+    if console is not None:  # a line that stays in logs, and a spinner or periodic lines
         console.print(message, highlight=False)
     else:
         log.info(message)
-    waiting = console.status("compiling kernels") if console is not None else nullcontext()
     try:
-        with waiting:
+        with _waiting(console):
             proc = subprocess.run(
                 command or CHILD,
                 stdout=subprocess.DEVNULL,
@@ -128,6 +131,21 @@ def compile_kernels_once(console: Console | None = None, command: list[str] | No
     except OSError as exc:  # the kernels are cached all the same; only the next check repeats
         log.warning("could not stamp the kernel cache %s: %s", stamp, exc)
     return True
+
+
+@contextmanager
+def _waiting(console: Console | None) -> Iterator[None]:
+    """A spinner on a terminal; on a log or pipe, a plain line every ``PROGRESS_EVERY_S``
+    (a log that stays silent for minutes looks hung)."""
+    if console is None:
+        yield
+    elif console.is_terminal:
+        with console.status("compiling kernels"):
+            yield
+    else:
+        with ProgressLines(console, every_s=PROGRESS_EVERY_S) as lines:
+            lines.description = "compiling kernels"  # the message above is the first line
+            yield
 
 
 def reconstruct_tiny_capture(folder: Path) -> None:

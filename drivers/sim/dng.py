@@ -15,6 +15,7 @@ import numpy as np
 import tifffile
 
 from core.errors import RigError
+from core.files import atomic_output
 
 # TIFF field types
 _BYTE, _ASCII, _SHORT, _LONG, _RATIONAL, _SRATIONAL = 1, 2, 3, 4, 5, 10
@@ -84,13 +85,14 @@ def write_dng(
         (33434, _RATIONAL, 1, _rational(exposure_s), True),  # ExposureTime
         (34855, _SHORT, 1, int(round(iso)), True),  # ISOSpeedRatings
     ]
-    tifffile.imwrite(
-        path,
-        data,
-        photometric=tifffile.PHOTOMETRIC.CFA,
-        compression=None,
-        subfiletype=0,
-        software="spectral-rig sim",
-        metadata=None,
-        extratags=extratags,
-    )
+    with atomic_output(path) as tmp:  # a full disk leaves no truncated frame
+        tifffile.imwrite(
+            tmp,
+            data,
+            photometric=tifffile.PHOTOMETRIC.CFA,
+            compression=None,
+            subfiletype=0,
+            software="spectral-rig sim",
+            metadata=None,
+            extratags=extratags,
+        )

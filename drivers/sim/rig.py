@@ -33,6 +33,7 @@ import yaml
 
 from core.config import bounded, from_mapping
 from core.errors import RigError
+from core.files import write_bytes_atomically
 from drivers.sim.ambient import AmbientConfig, room_spd
 from drivers.sim.camera import SensorConfig
 from drivers.sim.members import RigCamera, RigLight, RigProjector, RigSpectrometer
@@ -48,6 +49,8 @@ from drivers.sim.trajectory import (
 )
 from reconstruct.model.camera import Intrinsics, Pose, write_colmap_text
 from reconstruct.model.render import GroundPlane
+
+CARD_THICKNESS_M = 0.001
 
 
 @dataclass(frozen=True)
@@ -224,7 +227,7 @@ class SimRig:
                 "target_m": list(self.trajectory.target_m),
             },
         }
-        (folder / "rig.yaml").write_text(yaml.safe_dump(rig, sort_keys=False))
+        write_bytes_atomically(folder / "rig.yaml", yaml.safe_dump(rig, sort_keys=False).encode())
 
     def close(self) -> None:
         for device in (self.light, self.projector, self.camera, self.spectrometer):
@@ -246,8 +249,10 @@ def _load_scene(conf: SimConfig, seed: int) -> Scene:
 
 
 def stand_on_ground(scene: Scene) -> Scene:
-    """The scene moved up so its lowest point touches z = 0 (it stands on the ground)."""
-    lift = -float(scene.vertices[:, 2].min())
+    """The scene moved up so its lowest point touches z = 0 (it stands on the ground); a flat
+    scene (the chart) lies on it as a card with a thickness, not in the ground's plane."""
+    z = scene.vertices[:, 2]
+    lift = -float(z.min()) + (CARD_THICKNESS_M if np.ptp(z) == 0 else 0.0)
     return replace(scene, vertices=scene.vertices + np.array([0.0, 0.0, lift]))
 
 

@@ -25,6 +25,7 @@ import yaml
 from calibration.defaults import colorchecker_reflectances
 from calibration.grid import DEFAULT_GRID, SpectralGrid
 from core.errors import RigError
+from core.files import atomic_output, write_bytes_atomically
 
 SCENES = ("blob", "torus", "chart")
 _CHART_BORDER = 0.03  # reflectance of the card between patches (near black)
@@ -46,9 +47,12 @@ class Scene:
         """Write ``mesh.ply``, ``reflectance.npy``, ``patch.npy`` and ``scene.yaml``."""
         folder.mkdir(parents=True, exist_ok=True)
         mesh = trimesh.Trimesh(self.vertices, self.faces, process=False)
-        mesh.export(folder / "mesh.ply", encoding="binary")
-        np.save(folder / "reflectance.npy", self.reflectance.astype(np.float32))
-        np.save(folder / "patch.npy", self.patch.astype(np.int16))
+        with atomic_output(folder / "mesh.ply") as tmp:
+            mesh.export(tmp, encoding="binary")
+        with atomic_output(folder / "reflectance.npy") as tmp:
+            np.save(tmp, self.reflectance.astype(np.float32))
+        with atomic_output(folder / "patch.npy") as tmp:
+            np.save(tmp, self.patch.astype(np.int16))
         meta = {
             "name": self.name,
             "units": "metres",
@@ -58,7 +62,8 @@ class Scene:
             "patch": "patch.npy: ColorChecker 24 patch index per vertex (-1 = none)",
             "patch_names": colorchecker_reflectances()[0],
         }
-        (folder / "scene.yaml").write_text(yaml.safe_dump(meta, sort_keys=False))
+        text = yaml.safe_dump(meta, sort_keys=False)
+        write_bytes_atomically(folder / "scene.yaml", text.encode())
 
     @classmethod
     def load(cls, folder: Path) -> Scene:

@@ -30,8 +30,9 @@ from scipy.ndimage import maximum_filter
 
 from core.config import bounded, from_mapping
 from core.errors import RigError
-from core.files import write_bytes_atomically
+from core.files import atomic_output, write_bytes_atomically
 from core.manifest import MANIFEST_FILE, FrameRecord, verify_frames
+from core.manifest_check import check_session
 from core.session import Session
 from reconstruct.frames.raw import read_linear_rgb
 from reconstruct.stages.resumable import run_stage
@@ -215,8 +216,10 @@ def _decode(session: Session, conf: DecodeConfig, out_dir: Path) -> None:
         # float16 halves the cache (3 significant digits, below sensor noise) unless the
         # exposure normalisation pushes values past its range (65504)
         small = float(rgb.max()) < FLOAT16_RANGE
-        np.save(out_dir / f"{stem}.npy", rgb.astype(np.float16 if small else np.float32))
-        np.save(out_dir / f"{stem}_sat.npy", mask)
+        with atomic_output(out_dir / f"{stem}.npy") as tmp:
+            np.save(tmp, rgb.astype(np.float16 if small else np.float32))
+        with atomic_output(out_dir / f"{stem}_sat.npy") as tmp:
+            np.save(tmp, mask)
         frames.append(
             DecodedFrame(
                 record.frame,
@@ -261,6 +264,8 @@ def run(conf: DecodeConfig | Mapping[str, Any], session: Session | Path, out_dir
     conf = from_mapping(DecodeConfig, conf, "config", "decode")
     session = Session.of(session)
     root = session.root
+    # what `rig session verify` and `rig capture --resume` refuse, reconstruction refuses too
+    check_session(root, session.frames, root / MANIFEST_FILE)
     inputs = [root / MANIFEST_FILE] + [root / r.path for r in session.frames]
     run_stage("decode", asdict(conf), inputs, out_dir, lambda: _decode(session, conf, out_dir))
     return out_dir

@@ -7,11 +7,14 @@ Models and parameter order follow COLMAP's ``cameras.txt``.
 
 from __future__ import annotations
 
+import shutil
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from core.errors import RigError
 
@@ -146,19 +149,6 @@ class Pose:
         ``p = R^T (v - t)`` (paper eq. 17)."""
         return self.R.T @ (np.asarray(offset_cam, dtype=float) - self.t)
 
-    @property
-    def qvec(self) -> np.ndarray:
-        """Rotation as COLMAP's quaternion (qw, qx, qy, qz)."""
-        x, y, z, w = Rotation.from_matrix(self.R).as_quat()
-        q = np.array([w, x, y, z])
-        return q if q[0] >= 0 else -q
-
-    @classmethod
-    def from_qvec_tvec(cls, qvec: np.ndarray, tvec: np.ndarray) -> Pose:
-        qw, qx, qy, qz = qvec
-        R = Rotation.from_quat([qx, qy, qz, qw]).as_matrix()
-        return cls(R, np.asarray(tvec, dtype=float))
-
     @classmethod
     def look_at(
         cls, eye: np.ndarray, target: np.ndarray, up: tuple[float, float, float] = (0.0, 0.0, 1.0)
@@ -189,61 +179,78 @@ def write_colmap_text(
     cameras: dict[int, Intrinsics],
     images: dict[int, tuple[int, str, Pose]],
 ) -> None:
-    """Write ``cameras.txt``, ``images.txt`` and an empty ``points3D.txt``.
+    """Write a COLMAP text model with pycolmap: ``cameras.txt``, ``images.txt``, an empty
+    ``points3D.txt``, and ``rigs.txt``/``frames.txt`` (one camera per rig, one image per frame).
 
     ``images`` maps image id -> (camera id, image name, pose).
     """
-    folder.mkdir(parents=True, exist_ok=True)
-    lines = [
-        "# Camera list with one line of data per camera:",
-        "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]",
-    ]
+    import pycolmap
+
+    model = pycolmap.Reconstruction()
     for cid, cam in sorted(cameras.items()):
-        params = " ".join(repr(float(p)) for p in cam.params)
-        lines.append(f"{cid} {cam.model} {cam.width} {cam.height} {params}")
-    (folder / "cameras.txt").write_text("\n".join(lines) + "\n")
-    lines = [
-        "# Image list with two lines of data per image:",
-        "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME",
-        "#   POINTS2D[] as (X, Y, POINT3D_ID)",
-    ]
+        model.add_camera_with_trivial_rig(
+            pycolmap.Camera(
+                camera_id=cid,
+                model=cam.model,
+                width=cam.width,
+                height=cam.height,
+                params=list(cam.params),
+            )
+        )
     for iid, (cid, name, pose) in sorted(images.items()):
-        q = " ".join(repr(float(v)) for v in pose.qvec)
-        t = " ".join(repr(float(v)) for v in pose.t)
-        lines.append(f"{iid} {q} {t} {cid} {name}")
-        lines.append("")
-    (folder / "images.txt").write_text("\n".join(lines) + "\n")
-    (folder / "points3D.txt").write_text("# 3D point list (empty)\n")
+        cam_from_world = pycolmap.Rigid3d(pycolmap.Rotation3d(pose.R), pose.t)
+        model.add_image_with_trivial_frame(
+            pycolmap.Image(name=name, camera_id=cid, image_id=iid), cam_from_world
+        )
+    folder.mkdir(parents=True, exist_ok=True)
+    model.write_text(folder)
 
 
 def read_colmap_text(
     folder: Path,
 ) -> tuple[dict[int, Intrinsics], dict[int, tuple[int, str, Pose]]]:
-    """Read ``cameras.txt`` and ``images.txt`` of a COLMAP text model."""
-    cameras: dict[int, Intrinsics] = {}
-    images: dict[int, tuple[int, str, Pose]] = {}
+    """The cameras and posed images of a COLMAP text model, read with pycolmap."""
+    import pycolmap
+
     for name in ("cameras.txt", "images.txt"):
         if not (folder / name).is_file():
             raise RigError(
                 f"{folder / name} is missing",
                 "a COLMAP text model needs cameras.txt and images.txt",
             )
-    for n, line in enumerate((folder / "cameras.txt").read_text().splitlines(), 1):
-        if not line.strip() or line.startswith("#"):
-            continue
-        f = line.split()
-        try:
-            cameras[int(f[0])] = Intrinsics(f[1], int(f[2]), int(f[3]), tuple(map(float, f[4:])))
-        except (ValueError, IndexError) as exc:
-            raise RigError(f"{folder / 'cameras.txt'} line {n} is malformed: {exc}") from exc
-    data = [ln for ln in (folder / "images.txt").read_text().splitlines() if not ln.startswith("#")]
-    for n in range(0, len(data), 2):
-        f = data[n].split()
-        if not f:
-            continue
-        try:
-            pose = Pose.from_qvec_tvec(np.array(f[1:5], float), np.array(f[5:8], float))
-            images[int(f[0])] = (int(f[8]), f[9], pose)
-        except (ValueError, IndexError) as exc:
-            raise RigError(f"{folder / 'images.txt'} entry {f[:1]} is malformed: {exc}") from exc
+    model = pycolmap.Reconstruction()
+    try:
+        with _with_points3d(folder) as readable:
+            model.read_text(readable)
+    except ValueError as error:  # pycolmap's failed format checks
+        raise RigError(
+            f"{folder} is not a valid COLMAP text model: {str(error).splitlines()[0]}",
+            "write cameras.txt and images.txt in COLMAP's text format "
+            "(docs/architecture.md#session-format)",
+        ) from error
+    cameras = {
+        cid: Intrinsics(cam.model.name, cam.width, cam.height, tuple(map(float, cam.params)))
+        for cid, cam in model.cameras.items()
+    }
+    images: dict[int, tuple[int, str, Pose]] = {}
+    for iid, image in model.images.items():
+        if image.has_pose:
+            rigid = image.cam_from_world()
+            pose = Pose(np.asarray(rigid.rotation.matrix()), np.asarray(rigid.translation))
+            images[iid] = (image.camera_id, image.name, pose)
     return cameras, images
+
+
+@contextmanager
+def _with_points3d(folder: Path) -> Iterator[Path]:
+    """``folder``, or a copy of its cameras and images with an empty ``points3D.txt``: pycolmap
+    needs one, and known poses written by hand often have none."""
+    if (folder / "points3D.txt").is_file():
+        yield folder
+        return
+    with tempfile.TemporaryDirectory() as scratch:
+        for name in ("cameras.txt", "images.txt", "rigs.txt", "frames.txt"):
+            if (folder / name).is_file():
+                shutil.copyfile(folder / name, Path(scratch) / name)
+        (Path(scratch) / "points3D.txt").touch()
+        yield Path(scratch)

@@ -14,7 +14,6 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import os
 import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -22,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from core.files import fsync_dir
+from core.files import atomic_output
 from reconstruct.optimise.settings import OptimiseInput, OptimiseSettings
 
 log = logging.getLogger(__name__)
@@ -85,7 +84,6 @@ class Checkpoint:
     def save(self, state: OptimiseState) -> None:
         """Write atomically (temporary name, fsync, rename): a kill leaves the old or the new."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.path.with_name(f".{self.path.name}.tmp")
         meta = {
             "key": self.key,
             "stage": state.stage,
@@ -94,7 +92,7 @@ class Checkpoint:
             "history": state.history,
             "seconds": state.seconds,
         }
-        with open(tmp, "wb") as handle:
+        with atomic_output(self.path) as tmp, open(tmp, "wb") as handle:
             np.savez(
                 handle,
                 meta=np.array(json.dumps(meta, default=_plain)),
@@ -104,10 +102,6 @@ class Checkpoint:
                 initial_alpha=state.initial_alpha,
                 observed=state.observed,
             )
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, self.path)
-        fsync_dir(self.path.parent)
 
     def load(self) -> OptimiseState | None:
         """The saved state, or None without a checkpoint for these inputs (a stale or unreadable

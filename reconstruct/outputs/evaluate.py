@@ -30,6 +30,7 @@ from calibration.colour_difference import (
 from calibration.defaults import colorchecker_reflectances
 from calibration.estimation import noise_free_estimate
 from core.errors import RigError
+from core.files import atomic_output
 from core.lock import output_lock
 from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.model.raycast import RayCaster
@@ -278,6 +279,13 @@ def _evaluate(
             f"expected ({len(gt.vertices)}, {refl.shape[1]})",
             "give one spectrum per vertex of the ground-truth mesh on the reconstruction's grid",
         )
+    bad = np.unique(np.nonzero(~np.isfinite(gt_refl))[0])
+    if bad.size:  # a NaN would make every score NaN and still exit 0
+        raise RigError(
+            f"{gt_reflectance}: {bad.size} of {len(gt_refl)} true spectra hold NaN or inf "
+            f"(first: vertex {bad[0]})",
+            "give a finite reflectance for every vertex of the ground-truth mesh",
+        )
     d_acc, closest, tri = surface_distance(X, gt)
     recon_mesh = trimesh.Trimesh(X, faces, process=False)
     d_comp, _, _ = surface_distance(np.asarray(gt.vertices, dtype=float), recon_mesh)
@@ -318,6 +326,7 @@ def _evaluate(
         ),
     ]
     ev.files = [str(f) for f in files]
-    np.save(out / RMSE_FILE, rmse)
+    with atomic_output(out / RMSE_FILE) as tmp:
+        np.save(tmp, rmse)
     export.write_report(out / EVALUATION_FILE, asdict(ev))
     return ev

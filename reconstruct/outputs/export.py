@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -26,19 +25,11 @@ import trimesh
 from calibration.colorimetry import reflectance_to_srgb
 from calibration.grid import SpectralGrid
 from core.errors import RigError
+from core.files import atomic_output, write_bytes_atomically
 
 MESH_FILE = "mesh.ply"
 REFLECTANCE_FILE = "reflectance.npz"
 REPORT_FILE = "report.json"
-
-
-def _atomic(path: Path, data: bytes) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as handle:
-        handle.write(data)
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(tmp, path)
 
 
 def write_ply(
@@ -78,7 +69,7 @@ def write_ply(
         process=False,
     )
     data = trimesh.exchange.ply.export_ply(mesh, encoding="binary", vertex_normal=True)
-    _atomic(path, data)
+    write_bytes_atomically(path, data)
     return path
 
 
@@ -96,7 +87,6 @@ def write_reflectance_npz(
 ) -> Path:
     """``extra_arrays``: e.g. ``reflectance_std`` and ``position_std_m`` when estimated, and
     ``initial_reflectance`` (the 2-D estimate the solve started from)."""
-    tmp = path.with_name(path.name + ".tmp.npz")
     arrays = {
         "vertices": vertices,
         "faces": faces,
@@ -108,8 +98,8 @@ def write_reflectance_npz(
         "observed": observed,
         **dict(extra_arrays or {}),
     }
-    np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]
-    os.replace(tmp, path)
+    with atomic_output(path) as tmp:
+        np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]
     return path
 
 
@@ -134,7 +124,7 @@ def read_reflectance_npz(path: Path) -> dict[str, np.ndarray]:
 def write_report(path: Path, report: dict[str, Any]) -> Path:
     """``report.json``: at least ``light`` (``offset_m``, ``positions_m``), ``history`` (each
     cost term per iteration), ``timings_s``, ``settings`` and ``reflectance_scale_absolute``."""
-    _atomic(path, (json.dumps(_plain(report), indent=2) + "\n").encode())
+    write_bytes_atomically(path, (json.dumps(_plain(report), indent=2) + "\n").encode())
     return path
 
 

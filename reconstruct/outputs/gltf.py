@@ -20,6 +20,7 @@ import trimesh
 
 from calibration.colorimetry import reflectance_to_srgb
 from calibration.grid import SpectralGrid
+from core.files import write_bytes_atomically
 from reconstruct.outputs.result import ReconstructionResult
 
 # z up (the reconstruction, the board's frame) -> y up (glTF)
@@ -63,5 +64,5 @@ def write_glb(
         process=False,
     )
     data = trimesh.exchange.gltf.export_glb(trimesh.Scene(mesh), include_normals=True)
-    path.write_bytes(data)
+    write_bytes_atomically(path, data)
     return path

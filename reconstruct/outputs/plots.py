@@ -13,6 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from core.files import atomic_output
 from reconstruct.model.camera import Pose
 
 
@@ -115,6 +116,9 @@ def error_histogram(path: Path, errors: np.ndarray, label: str) -> Path:
 def _save(fig: Any, path: Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        with atomic_output(path) as tmp:  # a full disk leaves no truncated plot
+            fig.savefig(tmp, dpi=110)
+    finally:
+        plt.close(fig)
     return path

@@ -22,6 +22,7 @@ from calibration.colour_difference import illuminant
 from calibration.grid import SpectralGrid
 from core.config import bounded, from_mapping
 from core.errors import RigError
+from core.files import write_bytes_atomically
 from core.lock import output_lock
 from core.yamlio import read_yaml
 from reconstruct.model.camera import Intrinsics, Pose, read_colmap_text
@@ -60,8 +61,10 @@ def write_png(path: Path, rgb8: np.ndarray) -> Path:
     """Write a relit image; into a session only while no other command writes it."""
     with output_lock(path, "rig relight"):
         path.parent.mkdir(parents=True, exist_ok=True)
-        if not cv2.imwrite(str(path), cv2.cvtColor(rgb8, cv2.COLOR_RGB2BGR)):
-            raise RigError(f"cannot write {path}", "check the folder exists and is writable")
+        ok, png = cv2.imencode(path.suffix or ".png", cv2.cvtColor(rgb8, cv2.COLOR_RGB2BGR))
+        if not ok:
+            raise RigError(f"cannot encode the image for {path}", "check the image size")
+        write_bytes_atomically(path, png.tobytes())
     return path
 
 

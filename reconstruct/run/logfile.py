@@ -22,6 +22,8 @@ from typing import Any, TextIO
 from rich.console import Console
 
 from core.lock import locked
+from core.manifest import MANIFEST_FILE
+from core.manifest_check import check_session
 from core.session import RECON_DIR, Session
 from reconstruct.run.pipeline import RECONSTRUCT, Reconstruction, run_reconstruction
 from reconstruct.run.progress import IterationProgress
@@ -96,6 +98,8 @@ def run_logged(
     lines too unless ``verbosity >= 2``, the optimiser's iterations as progress bars (only
     logged when ``terminal`` is false); ``session`` opened by the caller, or its folder."""
     session = Session.of(session)  # a missing session fails before recon/ is made
+    # so does a manifest that `rig session verify` or `rig capture --resume` would refuse
+    check_session(session.root, session.frames, session.root / MANIFEST_FILE)
     with (
         locked(session.root, RECONSTRUCT),  # before recon/log.txt is touched
         captured_output(session.root / RECON_DIR, native=verbosity >= 2, terminal=terminal),

@@ -161,6 +161,25 @@ class RunStatus:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         write_bytes_atomically(self.path, (json.dumps(self.data, indent=2) + "\n").encode())
 
+    def end_after_error(self, status: str, **extra: Any) -> None:
+        """:meth:`end` while an error propagates: on a full disk, where no new file can be
+        made, the record is rewritten in place (it fits the blocks it already has); if even
+        that fails, a warning says so and the error being raised is what the user sees."""
+        try:
+            self.end(status, **extra)
+        except RigError as error:
+            text = (json.dumps(self.data, indent=2) + "\n").encode()
+            try:
+                fd = os.open(self.path, os.O_WRONLY | os.O_NOFOLLOW)
+                try:
+                    os.pwrite(fd, text, 0)
+                    os.ftruncate(fd, len(text))
+                    os.fsync(fd)
+                finally:
+                    os.close(fd)
+            except OSError:
+                log.warning("could not record the run as %s in %s: %s", status, self.path, error)
+
 
 @contextmanager
 def tracked(recon_dir: Path) -> Iterator[RunStatus]:
@@ -171,13 +190,13 @@ def tracked(recon_dir: Path) -> Iterator[RunStatus]:
     try:
         yield status
     except KeyboardInterrupt:
-        status.end("interrupted", note="stopped by Ctrl-C or SIGTERM")
+        status.end_after_error("interrupted", note="stopped by Ctrl-C or SIGTERM")
         raise
     except Exception as error:
         if _raised_by_a_stop(error) or interrupts.received() is not None:
-            status.end("interrupted", note="stopped by Ctrl-C or SIGTERM")
+            status.end_after_error("interrupted", note="stopped by Ctrl-C or SIGTERM")
         else:
-            status.end("failed", error=" ".join(str(error).split()))
+            status.end_after_error("failed", error=" ".join(str(error).split()))
         raise
     else:
         if status.data["status"] == "running":

@@ -11,6 +11,7 @@ manifest's sha256 by the decode stage.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import logging
@@ -23,7 +24,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from core.errors import RigError
 from core.files import write_bytes_atomically
+from core.fserrors import fs_error
 from reconstruct.stages.memory import peak_rss_mb, reset_peak_rss
 
 log = logging.getLogger("reconstruct")
@@ -124,9 +127,13 @@ def timed_run(recon_dir: Path) -> Iterator[Timings]:
     token = _RUN_TIMINGS.set(timings)
     try:
         yield timings
-    finally:
+    except BaseException:
         _RUN_TIMINGS.reset(token)
-        timings.write()
+        with contextlib.suppress(RigError):  # a full disk: the error raised is what matters
+            timings.write()
+        raise
+    _RUN_TIMINGS.reset(token)
+    timings.write()
 
 
 def record_timing(
@@ -163,7 +170,10 @@ def run_stage(
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / STAMP).unlink(missing_ok=True)
     reset_peak_rss()
-    work()
+    try:
+        work()
+    except OSError as error:  # a full or read-only disk: one line naming the file, not a bug
+        raise fs_error(error, out_dir) from error
     seconds = time.perf_counter() - start
     write_bytes_atomically(out_dir / STAMP, json.dumps({"hash": digest, "stage": name}).encode())
     record_timing(recon_dir, name, seconds, False, peak_rss_mb())

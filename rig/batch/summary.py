@@ -10,7 +10,7 @@ from typing import Any
 from rich.table import Table
 from rich.text import Text
 
-from core.errors import RigError
+from core.files import atomic_output
 from core.text import printable
 from rig.batch.task import Outcome
 
@@ -103,11 +103,8 @@ def table(outcomes: Sequence[Outcome]) -> Table:
 
 def write_csv(path: Path, outcomes: Sequence[Outcome]) -> Path:
     """Every column for every session, for a spreadsheet."""
-    try:
-        with open(path, "w", newline="", encoding="utf-8") as f:
-            writer = csv.DictWriter(f, fieldnames=COLUMNS)
-            writer.writeheader()
-            writer.writerows(rows(outcomes))
-    except OSError as error:
-        raise RigError(f"cannot write --summary {path}: {error}", "give a writable path") from error
+    with atomic_output(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as f:
+        writer = csv.DictWriter(f, fieldnames=COLUMNS)
+        writer.writeheader()
+        writer.writerows(rows(outcomes))
     return path

@@ -153,7 +153,12 @@ def _capture(
             "devices": devices.describe(),
         }
         info.setdefault("runs", []).append(run)
-        write_info(out, info)
+        try:
+            write_info(out, info)
+        except BaseException:
+            if not (out / SESSION_FILE).exists():  # a new session (a full disk): leave none
+                discard_unstarted_session(out)
+            raise
         engine = RunEngine(
             out, profile, devices, frames, state, ask=prompt, console=console, on_frame=on_frame
         )

@@ -32,6 +32,7 @@ from core.session import RAW_DIR
 from core.text import printable
 from drivers.protocols import LightSource
 from rig.capture.board_check import look_for_board
+from rig.capture.coverage import coverage_hint
 from rig.capture.devices import Ask, RigDevices, device_errors
 from rig.capture.frames import INCOMING, ExposureCheck, RawData, check_exposure, store_frame
 from rig.plans import (
@@ -47,11 +48,9 @@ from rig.plans import (
 )
 from rig.profile import Profile
 
-AZIMUTH_BINS = 12
 BOARD_MIN_CORNERS = 6  # fewer and the view gets no board pose
 BOARD_MIN_CONTRAST = 0.2  # paper - ink, fraction of 8-bit full scale
 CAPTURE_ATTEMPTS = 3
-BLOCKS = " ▁▂▃▄▅▆▇█"
 
 
 class CaptureStopped(RigError):
@@ -111,33 +110,6 @@ def view_directions(devices: RigDevices, profile: Profile) -> list[tuple[float, 
         if len(directions) >= n:
             return directions[:n]
     return [profile.plan.trajectory.view_direction(v, n) for v in range(n)]
-
-
-def coverage_hint(
-    directions: list[tuple[float, float]],
-    done: list[int],
-    view: int,
-    distance_factor: float | None = None,
-) -> str:
-    """One line: an azimuth histogram of the views captured so far and where this one goes
-    (and how far, relative to the usual distance, when the plan steps in and out)."""
-    counts = np.zeros(AZIMUTH_BINS, dtype=int)
-    for v in done:
-        counts[int(directions[v][0] // (360 / AZIMUTH_BINS)) % AZIMUTH_BINS] += 1
-    top = max(int(counts.max()), 1)
-    bars = "".join(BLOCKS[int(round(c / top * (len(BLOCKS) - 1)))] for c in counts)
-    elevations = sorted({round(directions[v][1]) for v in done})
-    az, el = directions[view]
-    distance = ""
-    if distance_factor is not None and distance_factor != 1:
-        step = "step closer" if distance_factor < 1 else "step back"
-        distance = f", distance {distance_factor:g}× the usual ({step})"
-    elif distance_factor is not None:
-        distance = ", usual distance"
-    return (
-        f"coverage so far: azimuth 0°[{bars}]360°, elevations {elevations or '-'}; "
-        f"this view: azimuth {round(az) % 360}°, elevation {el:.0f}°{distance}"
-    )
 
 
 def view_of(view: int, n_views: int) -> str:

@@ -27,6 +27,7 @@ from core.manifest import (
     read_manifest,
     record_paths,
 )
+from core.manifest_check import check_session
 from core.session import RAW_DIR
 from rig.capture.frames import INCOMING, frame_name, verify_file
 from rig.plans import FrameSpec
@@ -91,6 +92,7 @@ def prepare_resume(session_dir: Path, frames: list[FrameSpec], warn: Warn) -> li
     n_views = 1 + max((s.view for s in frames), default=-1)
     records = _drop_quarantined(session_dir, read_manifest(session_dir, n_views))
     _check_against_plan(session_dir, records, frames)
+    check_session(session_dir, records, session_dir / MANIFEST_FILE)
     missing = [r for r in records if not all((session_dir / p).is_file() for p in record_paths(r))]
     if missing:
         raise RigError(

@@ -14,7 +14,7 @@ from typing import Any
 import yaml
 
 from core.errors import RigError
-from core.files import write_bytes_atomically
+from core.files import temporary_name, write_bytes_atomically
 from core.lock import LOCK_FILE
 from core.manifest import MANIFEST_FILE
 from core.session import CALIBRATION_DIR, POSES_DIR, RAW_DIR, SESSION_FILE
@@ -103,7 +103,8 @@ def discard_unstarted_session(out_dir: Path) -> None:
         GROUND_TRUTH_DIR,
         POSES_DIR,
         MANIFEST_FILE,
-        f".{SESSION_FILE}.tmp",
+        f".{SESSION_FILE}.tmp",  # an older version's temporary name
+        temporary_name(Path(SESSION_FILE)).name,
         LOCK_FILE,
     }
     foreign = sorted(p.name for p in out_dir.iterdir() if p.name not in leftovers)

@@ -149,7 +149,4 @@ def run(args: argparse.Namespace) -> int:
 def _write_snippet(path: Path, spec: BoardSpec) -> None:
     from core.files import write_bytes_atomically
 
-    try:
-        write_bytes_atomically(path, spec.to_yaml().encode())
-    except OSError as exc:
-        raise RigError(f"cannot write {path}: {exc}", "check the folder is writable") from exc
+    write_bytes_atomically(path, spec.to_yaml().encode())

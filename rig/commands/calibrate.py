@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 from core.errors import RigError
 from rig import wizard
 from rig.cliargs import number
+from rig.commands import calibrate_camera
 from rig.outpaths import output_dir, output_file
 
 if TYPE_CHECKING:
@@ -32,8 +33,9 @@ def _store_root(args: argparse.Namespace) -> Path:
 
     if args.store:
         return output_dir(Path(args.store), "--store")
-    return output_dir(default_store_path(), f"${ENV_STORE}" if os.environ.get(ENV_STORE)
-                      else "the default store")
+    # `$SPECTRAL_RIG_STORE` naming a file gets the same one line as `--store` would
+    return output_dir(default_store_path(), f"${ENV_STORE}" if os.environ.get(ENV_STORE) else
+                      "the default store")
 
 
 def _store(args: argparse.Namespace, *, must_exist: bool = True) -> CalibrationStore:
@@ -353,6 +355,11 @@ def cmd_select(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- camera from a chart -------------------------------------------------------------------------
+def cmd_camera(args: argparse.Namespace) -> int:
+    return calibrate_camera.run(args, _store(args))
+
+
 # -- parser -------------------------------------------------------------------------------------
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -429,6 +436,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--top", type=int, default=15, help="rows to print and plot")
     p.add_argument("--plot", metavar="PNG", default="illumination-selection.png")
     p.set_defaults(func=cmd_select)
+
+    calibrate_camera.add_parser(sub, common, cmd_camera)
 
     p = sub.add_parser("init-store", parents=[common], help="write the built-in default store")
     p.add_argument("dir", nargs="?", help="directory (default: --store or the default store)")

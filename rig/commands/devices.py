@@ -103,7 +103,10 @@ def probe_cameras() -> tuple[list[Found], list[str]]:
     try:
         gp = importlib.import_module("gphoto2")
     except ImportError:
-        return [], ["cameras not probed: install `spectral-rig[gphoto2]` for tethered cameras"]
+        from core.install import install_command
+
+        hint = install_command("gphoto2")
+        return [], [f"cameras not probed: `{hint}` adds tethered cameras"]
     try:
         detected = list(gp.Camera.autodetect().items())  # (name, port) pairs
     except gp.GPhoto2Error as error:
@@ -115,7 +118,10 @@ def probe_spectrometers() -> tuple[list[Found], list[str]]:
     try:
         spectrometers = importlib.import_module("seabreeze.spectrometers")
     except ImportError:
-        return [], ["spectrometers not probed: install `spectral-rig[seabreeze]` for Ocean ones"]
+        from core.install import install_command
+
+        hint = install_command("seabreeze")
+        return [], [f"spectrometers not probed: `{hint}` adds Ocean ones"]
     try:
         devices = spectrometers.list_devices()
     except Exception as error:  # backend-specific SeaBreezeError types

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
+import os
 from collections import Counter
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -28,6 +29,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def handle_verify(args: argparse.Namespace) -> int:
     from core.manifest import verify_frames
+    from core.manifest_check import session_problems
     from core.session import Session
     from rig.console import console as plain_console
 
@@ -36,7 +38,8 @@ def handle_verify(args: argparse.Namespace) -> int:
     problems = verify_frames(session.root, session.frames)
     problems += companion_problems(session)
     counts = Counter(r.frame for r in session.frames)
-    duplicates = sorted(f for f, n in counts.items() if n > 1)
+    shared = session_problems(session.root, session.frames)
+    duplicates = [text for kind, text in shared if kind == "duplicate"]
     for problem in problems:
         console.print(
             f"{problem.problem:<14} frame {problem.record.frame} (view "
@@ -44,8 +47,8 @@ def handle_verify(args: argparse.Namespace) -> int:
             f"{problem.record.path}",
             highlight=False,
         )
-    for frame in duplicates:
-        console.print(f"duplicate      frame {frame} appears {counts[frame]} times")
+    for text in duplicates:
+        console.print(f"duplicate      {text}", highlight=False)
     planned = session.info.plan.frames
     missing_planned = (planned - len(counts)) if planned is not None else 0
     strays = stray_files(session)
@@ -105,12 +108,15 @@ def companion_problems(session: Session) -> list[FrameProblem]:
     """Files delivered with a frame (e.g. a JPEG beside the RAW) are checked like the frame."""
     from core.files import sha256_file
     from core.manifest import FrameProblem
+    from core.manifest_check import leads_out
 
     problems = []
     for record in session.frames:
         for other in record.extra.get("other_files", []):
             file = session.root / other["path"]
-            if not file.is_file():
+            if os.path.lexists(file) and leads_out(session.root, file):
+                problems.append(FrameProblem(record, f"link out {other['path']}"))
+            elif not file.is_file():
                 problems.append(FrameProblem(record, f"missing {other['path']}"))
             elif sha256_file(file) != other["sha256"]:
                 problems.append(FrameProblem(record, f"hash mismatch {other['path']}"))

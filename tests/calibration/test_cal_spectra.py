@@ -100,7 +100,7 @@ def test_validation_errors_name_the_source(w: list[float], v: list[float], messa
 
 
 def test_validate_keeps_signed_values_when_asked() -> None:
-    _, v = validate_spectrum([1, 2, 3, 4], [-1, 0, 1, 2], nonnegative=False)
+    _, v = validate_spectrum([400, 410, 420, 430], [-1, 0, 1, 2], nonnegative=False)
     assert v[:, 0].tolist() == [-1, 0, 1, 2]
 
 
@@ -112,3 +112,9 @@ def test_second_difference_matrix() -> None:
     np.testing.assert_allclose(d @ x**2, 2)  # curvature 2 everywhere
     with pytest.raises(RigError):
         second_difference_matrix(2)
+
+
+def test_four_even_samples_are_resampled_with_the_spline() -> None:
+    """colour's Sprague interpolator needs six samples (it asserted on an import of four)."""
+    out = resample([400, 500, 600, 700], [1.0, 2.0, 1.0, 1.0])
+    assert out.shape == (31,) and np.all(np.isfinite(out)) and out[10] == pytest.approx(2.0)

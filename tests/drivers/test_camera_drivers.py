@@ -3,22 +3,25 @@ app, hand-held import ordered by EXIF time, and the small EXIF reader on real fi
 
 from __future__ import annotations
 
+import logging
 import os
 import threading
-from datetime import datetime
+from datetime import datetime, timezone
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 from PIL import Image
 
 from core.errors import RigError
-from drivers.cameras.exif import read_exif
+from drivers.cameras.exif import ExifInfo, read_exif
 from drivers.cameras.files import copy_durably, write_durably
 from drivers.cameras.folder_watch import FolderWatchCamera, frame_from_files
 from drivers.cameras.gphoto2_camera import Gphoto2Camera, parse_shutter
 from drivers.cameras.handheld import HandheldImportCamera, match_files_to_frames
 from drivers.protocols import Camera
+from drivers.sim.dng import write_dng
 
 # -- fake python-gphoto2 --------------------------------------------------------------------
 GP_WIDGET_TEXT, GP_WIDGET_RADIO, GP_WIDGET_MENU = 2, 5, 6  # libgphoto2's CameraWidgetType
@@ -262,7 +265,13 @@ def test_folder_watch_times_out_when_nothing_arrives(tmp_path: Path) -> None:
 
 # -- EXIF and hand-held import -------------------------------------------------------------------
 def write_jpeg(
-    path: Path, taken: str, exposure: float = 0.02, iso: int = 400, offset: str | None = None
+    path: Path,
+    taken: str,
+    exposure: float = 0.02,
+    iso: int = 400,
+    offset: str | None = None,
+    subsec: str | None = None,
+    serial: str | None = None,
 ) -> None:
     exif = Image.Exif()
     exif[0x0110] = "Test Cam"
@@ -270,12 +279,18 @@ def write_jpeg(
     ifd[0x9003] = taken
     if offset:
         ifd[0x9011] = offset  # OffsetTimeOriginal
+    if subsec:
+        ifd[0x9291] = subsec  # SubSecTimeOriginal
+    if serial:
+        ifd[0xA431] = serial  # BodySerialNumber
     ifd[0x829A] = exposure
     ifd[0x8827] = iso
     Image.new("RGB", (8, 8)).save(path, exif=exif)
 
 
-def test_exif_from_jpeg_and_from_a_real_dng(tmp_path: Path, shared_data: Path) -> None:
+def test_exif_from_jpeg_and_from_a_real_dng(
+    tmp_path: Path, shared_data: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     write_jpeg(tmp_path / "a.jpg", "2024:05:01 10:00:03")
     info = read_exif(tmp_path / "a.jpg")
     assert info.taken == datetime(2024, 5, 1, 10, 0, 3).astimezone()  # no offset: local time
@@ -284,6 +299,36 @@ def test_exif_from_jpeg_and_from_a_real_dng(tmp_path: Path, shared_data: Path) -
     assert dng.model == "Canon EOS Kiss X4"
     assert dng.exposure_s is None and dng.taken is None  # zero/empty fields are not guessed
     assert read_exif(tmp_path / "missing.cr2").taken is None
+    (tmp_path / "not-an-image.nef").write_bytes(b"no EXIF here")
+    with caplog.at_level(logging.WARNING):
+        assert read_exif(tmp_path / "not-an-image.nef") == ExifInfo()
+    assert not caplog.records  # a file without EXIF is no warning on the terminal
+
+
+def test_exif_subseconds_serial_and_a_dng_with_tiff_ep_tags_in_ifd0(tmp_path: Path) -> None:
+    write_jpeg(
+        tmp_path / "a.jpg", "2024:05:01 10:00:03", offset="-05:00", subsec="25", serial="0123"
+    )
+    info = read_exif(tmp_path / "a.jpg")
+    assert info.taken == datetime(2024, 5, 1, 15, 0, 3, 250000, tzinfo=timezone.utc)
+    assert info.serial == "0123"
+    # the simulated camera's DNG keeps exposure, ISO and serial in IFD0, as TIFF/EP allows
+    mosaic = np.zeros((8, 8), np.uint16)
+    write_dng(
+        tmp_path / "s.dng",
+        mosaic,
+        black_level=0,
+        white_level=4095,
+        exposure_s=1 / 125,
+        iso=1600,
+        make="spectral-rig",
+        model="Sim",
+        serial="SIM-7",
+        color_matrix=np.eye(3),
+        as_shot_neutral=np.ones(3),
+    )
+    dng = read_exif(tmp_path / "s.dng")
+    assert (dng.exposure_s, dng.iso, dng.serial, dng.model) == (1 / 125, 1600.0, "SIM-7", "Sim")
 
 
 def test_frame_timestamps_are_utc_using_the_exif_offset(tmp_path: Path) -> None:

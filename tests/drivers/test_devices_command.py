@@ -7,6 +7,7 @@ from types import SimpleNamespace
 
 import pytest
 
+from core.install import install_command
 from rig.cli import main
 from rig.commands import devices
 
@@ -62,8 +63,8 @@ def test_missing_libraries_become_notes(monkeypatch) -> None:
     monkeypatch.setitem(sys.modules, "seabreeze.spectrometers", None)
     rows, notes = devices.discover((devices.probe_cameras, devices.probe_spectrometers))
     assert rows == []
-    assert any("spectral-rig[gphoto2]" in n for n in notes)
-    assert any("spectral-rig[seabreeze]" in n for n in notes)
+    assert any(install_command("gphoto2") in n for n in notes)
+    assert any(install_command("seabreeze") in n for n in notes)
 
 
 def test_a_crashing_probe_is_a_note_not_a_crash() -> None:

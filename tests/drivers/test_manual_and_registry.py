@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
 from core.errors import RigError
+from core.install import install_command
 from drivers.lights.enttec import EnttecDmxPro
 from drivers.lights.manual import ManualLight
 from drivers.lights.rgbcw_emulator import serve_pty
@@ -161,8 +163,17 @@ def test_tuya_without_tinytuya_names_the_extra(monkeypatch) -> None:
     import sys
 
     monkeypatch.setitem(sys.modules, "tinytuya", None)  # import fails as if not installed
-    with pytest.raises(RigError, match=r"spectral-rig\[tuya\]"):
+    with pytest.raises(RigError, match=re.escape(install_command("tuya"))):
         open_light({"driver": "tuya", "device_id": "x", "address": "10.0.0.2", "local_key": "k"})
+
+
+@pytest.mark.parametrize("key", ["device_id", "local_key"])
+def test_tuya_refuses_the_shipped_placeholders_and_names_the_guide(key: str) -> None:
+    options = {"driver": "tuya", "device_id": "bf12", "address": "10.0.0.2", "local_key": "k"}
+    options[key] = f"REPLACE-WITH-{key.upper().replace('_', '-')}"
+    with pytest.raises(RigError, match=f"{key} is still the shipped placeholder") as error:
+        open_light(options)
+    assert "tinytuya wizard" in str(error.value) and "docs/first-scan.md#" in str(error.value)
 
 
 def test_file_import_spectrometer_from_the_registry() -> None:

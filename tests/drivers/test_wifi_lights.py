@@ -3,12 +3,15 @@ through a fake tinytuya device object."""
 
 from __future__ import annotations
 
+import re
 import socket
+import sys
 import threading
 
 import pytest
 
-from core.errors import RigError
+from core.errors import MissingDependencyError, RigError
+from core.install import install_command
 from drivers.lights.magichome import MagicHomeLight
 from drivers.lights.tuya import TuyaBulb
 from drivers.transports.replay import ScriptedTransport
@@ -67,6 +70,60 @@ def test_magic_home_rejects_a_corrupt_state_reply() -> None:
     with ScriptedTransport([(STATE_QUERY, corrupt)]) as t:
         with pytest.raises(RigError, match="malformed Magic Home state"):
             MagicHomeLight(t)
+
+
+def state_reply(model: int, firmware: int) -> bytes:
+    body = bytes([0x81, model, 0x23, 0x61, 0x21, 0x06, 0, 0, 0, 0, firmware, 0, 0x0F])
+    return body + bytes([sum(body) & 0xFF])
+
+
+def test_magic_home_picks_the_protocol_from_flux_leds_model_database() -> None:
+    # an RGBCW bulb (0x35) with firmware 7 speaks the 9-byte protocol that turns on by itself;
+    # already on, so no power message; persist: false writes 0x41 instead of 0x31
+    body = bytes([0x41, 0, 0, 0, 0, 255, 0x0F, 0x0F])  # whites only: mode 0F
+    script = [(STATE_QUERY, state_reply(0x35, 7)), (body + bytes([sum(body) & 0xFF]), None)]
+    with ScriptedTransport(script) as t:
+        light = MagicHomeLight(t, persist=False, exclusive_white=True)
+        assert light.protocol.name == "LEDENET_AUTO_ON"
+        light.set_levels({"c": 1.0})
+    # an RGB-only controller (8-byte levels, no white channels) is refused
+    with ScriptedTransport([(STATE_QUERY, state_reply(0x33, 9))]) as t:
+        with pytest.raises(RigError, match="model 0x33 .* speaks flux_led's .*8BYTE"):
+            MagicHomeLight(t)
+
+
+def wrapped_levels(
+    counter: int, mode: int, hsv: tuple[int, int, int], white: tuple[int, int]
+) -> bytes:
+    """The 25-byte levels message written out from its documented layout: the outer wrapper
+    b0 b1 b2 b3 00 01, version 02, a counter, the inner length 00 0e, then e0 01 00, the write
+    mode, hue/2, saturation and value in %, white temperature (0 warm .. 100 cool) and
+    brightness in %, 00 00 14 00 00, and the checksum of everything before it."""
+    inner = bytes([0xE0, 0x01, 0x00, mode, *hsv, *white, 0x00, 0x00, 0x14, 0x00, 0x00])
+    body = bytes([0xB0, 0xB1, 0xB2, 0xB3, 0x00, 0x01, 0x02, counter, 0x00, len(inner)]) + inner
+    return body + bytes([sum(body) & 0xFF])
+
+
+def test_magic_home_rgbcw_bulb_from_firmware_10_takes_the_25_byte_message() -> None:
+    script = [
+        (STATE_QUERY, state_reply(0x35, 10)),  # already on: no power message
+        (wrapped_levels(0, 0xB1, (0, 0, 0), (100, 100)), None),  # {c: 1}: whites only
+        (wrapped_levels(1, 0xA1, (120, 100, 100), (0, 0)), None),  # {b: 1}: hue 240 / 2
+        (wrapped_levels(2, 0xB1, (0, 0, 0), (25, 40)), None),  # {c: .1, w: .3}: 26 + 77 of 255
+    ]
+    assert len(script[1][0]) == 25
+    with ScriptedTransport(script) as t:
+        light = MagicHomeLight(t, exclusive_white=True)
+        assert light.protocol.name == "LEDENET_25_BYTE"
+        light.set_levels({"c": 1.0})
+        light.set_levels({"b": 1.0})
+        light.set_levels({"c": 0.1, "w": 0.3})
+
+
+def test_magic_home_without_flux_led_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "flux_led", None)
+    with pytest.raises(MissingDependencyError, match=re.escape(install_command("flux"))):
+        MagicHomeLight(ScriptedTransport([]))
 
 
 def test_magic_home_over_a_real_tcp_socket() -> None:

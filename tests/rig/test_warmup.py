@@ -125,3 +125,33 @@ def test_a_wrong_session_fails_before_the_warm_up(
     assert cli.main(["reconstruct", str(tmp_path / "nowhere")]) != 0
     assert "is not a session directory" in capsys.readouterr().err
     assert calls == []
+
+
+class ReleasingLog(io.StringIO):
+    """A log file that lets the child finish once a periodic progress line reached it."""
+
+    def __init__(self, release: Path) -> None:
+        super().__init__()
+        self.release = release
+
+    def write(self, text: str) -> int:
+        if "] compiling kernels" in text:
+            self.release.touch()
+        return super().write(text)
+
+
+def test_on_a_log_the_wait_prints_periodic_plain_lines(
+    stamp: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+):
+    monkeypatch.setattr(warmup, "PROGRESS_EVERY_S", 0.01)
+    release = tmp_path / "release"
+    wait = (
+        f"import os, time\nfor _ in range(3000):\n"
+        f"    if os.path.exists({str(release)!r}): break\n    time.sleep(0.01)"
+    )
+    child = [sys.executable, "-c", wait]  # gives up after a while: no line must fail, not hang
+    log = ReleasingLog(release)
+    assert warmup.compile_kernels_once(Console(file=log, width=200), command=child)
+    text = log.getvalue()
+    assert text.startswith("compiling the numerical kernels once")
+    assert "] compiling kernels" in text and "\x1b[" not in text

@@ -14,6 +14,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
 from core.errors import RigError
+from core.files import atomic_output
 from reconstruct.poses.board.spec import PRINT_MARGIN_M, BoardSpec
 
 INCH_M = 0.0254
@@ -68,10 +69,8 @@ def write_sheet(spec: BoardSpec, path: Path, dpi: int = 300) -> Path:
         raise RigError(f"--dpi {dpi} is out of range", "use 150-600 (300 is typical)")
     path.parent.mkdir(parents=True, exist_ok=True)
     fig = draw_sheet(spec)
-    try:
-        fig.savefig(path, dpi=dpi, facecolor="white", metadata=_metadata(spec, suffix))
-    except OSError as exc:
-        raise RigError(f"cannot write {path}: {exc}", "check the folder is writable") from exc
+    with atomic_output(path) as tmp:  # a full disk leaves no truncated sheet
+        fig.savefig(tmp, dpi=dpi, facecolor="white", metadata=_metadata(spec, suffix))
     return path
 
 

@@ -139,3 +139,22 @@ def test_shadow_rays_are_skipped_only_where_nothing_can_block() -> None:
     assert np.mean(meets & ~sampled) < 1e-3  # and tests little more than needed
     axis = np.array([[2.0, 0.0, 0.0], [0.5, 0.5, 3.0]])
     assert _segment_meets_box(axis, np.array([-2.0, 0.0, 0.0]), lo, hi).tolist() == [True, False]
+
+
+def test_the_chart_lies_on_the_ground_as_a_card_that_the_camera_sees() -> None:
+    n = len(SimRig({"subdivisions": 1, "views": 1}, seed=0).scene.wavelengths)
+    rig = SimRig(
+        {
+            "scene": "chart",
+            "views": 1,
+            "camera": {"width": 160, "height": 120, "focal_px": 300.0},
+            "ground": _uniform_ground(n),
+        },
+        seed=0,
+    )
+    assert rig.scene.vertices[:, 2].min() > 0  # above the ground's plane, not in it
+    rig.camera.set_pose(Pose.look_at(np.array([0.0, -0.05, 0.4]), np.zeros(3)))
+    hits = rig.camera._view_hits()
+    assert hits.on_ground is not None
+    patch = rig.scene.patch[hits.vertex_index[~hits.on_ground].ravel()]
+    assert len(set(patch[patch >= 0].tolist())) == 24  # every patch seen, none hidden by paper

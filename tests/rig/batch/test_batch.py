@@ -13,6 +13,7 @@ import pytest
 from batch_sessions import FAST, copies
 
 from core.errors import RigError
+from core.install import install_command
 from rig.batch.sessions import collect
 from rig.batch.task import is_reconstructed
 from rig.cli import main
@@ -120,4 +121,4 @@ def test_without_dask_batch_says_what_to_install(
         monkeypatch.delitem(sys.modules, name, raising=False)
     assert main(["batch", str(tmp_path)]) == 2
     err = capfd.readouterr().err
-    assert "pip install 'spectral-rig[batch]'" in err and len(err.strip().splitlines()) == 1
+    assert install_command("batch") in err and len(err.strip().splitlines()) == 1
