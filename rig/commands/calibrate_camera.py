@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from core.errors import RigError
+from rig.cliargs import number
 from rig.outpaths import output_file
 
 if TYPE_CHECKING:
@@ -188,13 +189,13 @@ def add_parser(
     p.add_argument("--prior", metavar="FILE|DIR", help=PRIOR_HELP)
     p.add_argument(
         "--components",
-        type=int,
+        type=number(int, min=1, max=1000),
         default=DEFAULT_COMPONENTS,
         help="principal components per channel in the prior",
     )
     p.add_argument(
         "--white-level",
-        type=float,
+        type=number(float, above=0, max=1e9),
         metavar="V",
         help="patch values at or above V are saturated (refused)",
     )

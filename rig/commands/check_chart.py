@@ -8,6 +8,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from rig.cliargs import MAX_VIEWS, number
 from rig.outpaths import output_dir
 
 if TYPE_CHECKING:
@@ -32,7 +33,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("session", type=Path, help="session directory")
     parser.add_argument(
-        "--view", type=int, action="append", default=None, metavar="N",
+        "--view", type=number(int, min=0, max=MAX_VIEWS - 1), action="append", default=None,
+        metavar="N",
         help="look only in view N (repeatable); default every view",
     )  # fmt: skip
     parser.add_argument(

@@ -251,6 +251,12 @@ NUMBERS = [
          with_file("cam.yaml", "width: 64\nheight: 48\nfocal_px: 80\neye: [1.0e+300, 0, 0]\n"
                    "target: [0, 0, 0]\n", "relight", "TMP/s", "--camera", "TMP/cam.yaml"),
          r"cam\.yaml: key 'eye\[0\]' is 1e\+300|cam\.yaml: key 'eye' .*\[-1000, 1000\]"),
+    Case("bound-check-chart-view-negative", argv("check-chart", "TMP/s", "--view", "-2"),
+         r"argument --view: -2 is not allowed .*\[0, 999\]"),
+    Case("bound-camera-fit-white-level-inf",
+         argv("calibrate", "camera", "--patches", "TMP/p.csv", "--lamp", "L", "--name", "C",
+              "--white-level", "inf"),
+         r"argument --white-level: inf"),
     Case("bound-view-port", argv("view", "TMP", "--port", "70000"),
          r"--port 70000 is not a port number"),
 ]
