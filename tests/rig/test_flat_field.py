@@ -218,3 +218,39 @@ def test_reconstruction_with_fall_off_with_and_without_the_flat_field(tmp_path: 
     # with the flat field the fall-off costs (nearly) nothing against an ideal lens
     for key in ("spectral_rmse", "de00_vertex", "accuracy_mm"):
         assert rows["fall-off, flat field"][key] < 1.05 * rows["ideal lens"][key]
+
+
+def test_wizard_asks_a_person_for_the_card_and_its_distance(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Without a device that sets the card up, the person holds it (here the sim camera looks
+    at the card scene) and answers the distance and focal length prompts."""
+    from rich.console import Console
+
+    from rig.capture.devices import RigDevices
+
+    distance = card_distance(SimRig({"scene": "chart", "camera": CAMERA, "subdivisions": 0}))
+    asked: list[str] = []
+
+    def answer(self: Console, prompt: str = "", **_: object) -> str:
+        asked.append(prompt)
+        if "distance in m" in prompt and prompt.startswith("flat field"):
+            return str(distance)
+        return "200" if "focal length in pixels" in prompt else ""
+
+    monkeypatch.setattr(Console, "input", answer)
+    monkeypatch.setattr(RigDevices, "white_card_source", property(lambda self: None))
+    store_dir = tmp_path / "store"
+    rig_yaml = profile(
+        tmp_path, store_dir, scene="card",
+        trajectory={"elevations_deg": [90.0], "radius_m": distance},
+    )
+    args = ["calibrate", "wizard", "--profile", str(rig_yaml), "--store", str(store_dir),
+            "--flat-field-positions", "2"]
+    assert main(args) == 0
+    flat_prompts = [p for p in asked if p.startswith("flat field")]
+    assert [p.split(":")[0] for p in flat_prompts] == [
+        "flat field", "flat field", "flat field 1/2", "flat field 2/2"]
+    _, flat = CalibrationStore(store_dir).flat_field("flat/sim")
+    truth = LENS.gain(SimRig({"camera": CAMERA, "scene": "chart", "subdivisions": 0}).intrinsics)
+    assert np.abs(flat.gain(160, 120) - truth[..., None]).max() < 0.03
