@@ -3,6 +3,7 @@ with its hash checked, and a real lens in lensfun's database falls off monotonic
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -97,3 +98,26 @@ def test_lensfun_profile_of_a_real_lens_falls_off_monotonically() -> None:
         lensfun_flat_field("Canon Canon EOS 5D Mark II", "No Such Lens 3mm", 3, 2, (60, 40))
     with pytest.raises(RigError, match="no camera"):
         lensfun_flat_field("Nobody Nothing", "x", 3, 2, (60, 40))
+
+
+def test_flat_field_command_from_lensfun_and_the_missing_extra(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from rig.cli import main
+
+    pytest.importorskip("lensfunpy")
+    store = ["--store", str(tmp_path / "store")]
+    args = ["calibrate", "flat-field", "--lensfun", "Canon Canon EOS 5D Mark II",
+            "--lens", "Canon EF 50mm f/1.4 USM", "--focal", "50", "--aperture", "2.8",
+            "--size", "5616x3744", "--name", "flat/ef50", *store]
+    assert main(args) == 0
+    entry, flat = CalibrationStore(tmp_path / "store").flat_field("flat/ef50")
+    assert flat.method == "lensfun" and "lensfun profile" in entry.provenance["source"]
+    assert flat.corner_gain()[1] == pytest.approx(0.58, abs=0.01)
+    assert main(["calibrate", "show", "flat/ef50", *store]) == 0
+    assert "corner gain G" in capsys.readouterr().out
+    assert main([*args[:-4], "--focal", "85", *store]) == 2
+    assert "outside" in capsys.readouterr().err
+    monkeypatch.setitem(sys.modules, "lensfunpy", None)  # not installed
+    assert main(args) == 2
+    assert "lensfunpy is not installed" in capsys.readouterr().err
