@@ -6,6 +6,7 @@ Layout (docs/architecture.md, Calibration store)::
       index.yaml                  format, then one record per entry *version*
       lights/bulb__r.v1.csv       wavelength_nm,power
       cameras/canon...v1.csv      wavelength_nm,R,G,B
+      flat_fields/<name>.v1.yaml  a lens fall-off model (calibration.flat_field)
 
 Spectra are stored at their measured sampling and resampled on read, so the store is
 independent of the grid. Adding a spectrum under an existing name creates the next version;
@@ -23,7 +24,7 @@ import hashlib
 import os
 import re
 import shutil
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from contextlib import AbstractContextManager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -33,6 +34,7 @@ import numpy as np
 import yaml
 
 from calibration import defaults
+from calibration.flat_field import FlatField
 from calibration.grid import DEFAULT_GRID, SpectralGrid
 from calibration.spectra import resample, validate_spectrum
 from core.errors import RigError
@@ -43,7 +45,7 @@ from core.yamlio import load_yaml, yaml_problem
 FORMAT = "spectral-rig-calibration/1"
 ENV_STORE = "SPECTRAL_RIG_STORE"
 INDEX = "index.yaml"
-KINDS: tuple[str, ...] = ("light", "camera")
+KINDS: tuple[str, ...] = ("light", "camera", "flat_field")
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+\- /]*$")
 # A change holds the lock for milliseconds; a holder for longer is stuck or a whole init-store.
 STORE_WAIT_S = 30.0
@@ -57,7 +59,7 @@ def value_columns(kind: str) -> list[str]:
 
 @dataclass
 class Entry:
-    """One version of one named spectrum."""
+    """One version of one named spectrum (or flat field)."""
 
     name: str
     kind: str
@@ -163,7 +165,7 @@ class CalibrationStore:
             if entry.kind not in KINDS:
                 raise RigError(
                     f"{self.index_path}: entry {entry.name!r} has kind {entry.kind!r}",
-                    "use light or camera",
+                    f"use one of {', '.join(KINDS)}",
                 )
             if not isinstance(entry.version, int) or not isinstance(entry.provenance, dict):
                 raise RigError(
@@ -191,7 +193,7 @@ class CalibrationStore:
             raise RigError(
                 f"{self.index_path}: entry {entry.name!r} v{entry.version} has "
                 f"file: {file!r}, which is not a file inside the store",
-                "entries name files under lights/ or cameras/ of the store; restore "
+                "entries name files under lights/, cameras/ or flat_fields/ of the store; restore "
                 "index.yaml from a backup or a session's calibration/ snapshot",
             )
 
@@ -238,6 +240,15 @@ class CalibrationStore:
 
     def read_native(self, entry: Entry) -> tuple[np.ndarray, np.ndarray]:
         """An entry's spectrum at its stored sampling, after checking its file hash."""
+        if entry.kind == "flat_field":
+            raise RigError(
+                f"{entry.name!r} is a flat field, not a spectrum",
+                f"read it with `rig calibrate show {entry.name}` or CalibrationStore.flat_field",
+            )
+        return read_spectrum_csv(self._checked_file(entry), entry.columns)
+
+    def _checked_file(self, entry: Entry) -> Path:
+        """An entry's file, present and with the hash the index recorded."""
         path = self.root / entry.file
         if not path.exists():
             raise RigError(
@@ -247,9 +258,9 @@ class CalibrationStore:
         if _sha256(path) != entry.sha256:
             raise RigError(
                 f"calibration file {path} was modified after it was added (sha256 mismatch)",
-                "import the edited spectrum as a new version instead of editing files in place",
+                "import the edited file as a new version instead of editing files in place",
             )
-        return read_spectrum_csv(path, entry.columns)
+        return path
 
     def light_spd(
         self, name: str, grid: SpectralGrid = DEFAULT_GRID, version: int | None = None
@@ -294,6 +305,26 @@ class CalibrationStore:
         values: np.ndarray,
         provenance: Mapping[str, Any],
     ) -> Entry:
+        columns = value_columns(kind)
+        w, v = validate_spectrum(wavelengths, values, source=f"{kind} {name!r}")
+        if v.shape[1] != len(columns):
+            raise RigError(
+                f"{kind} {name!r} has {v.shape[1]} value columns",
+                f"a {kind} needs {len(columns)} ({', '.join(columns)})",
+            )
+        return self._add_file_unlocked(
+            name, kind, "csv", lambda path: write_spectrum_csv(path, w, v, columns), provenance
+        )
+
+    def _add_file_unlocked(
+        self,
+        name: str,
+        kind: str,
+        suffix: str,
+        write: Callable[[Path], None],
+        provenance: Mapping[str, Any],
+    ) -> Entry:
+        """The next version of ``name``: its file written by ``write``, then the index."""
         if not _NAME.match(name) or ".." in name:
             raise RigError(
                 f"invalid calibration entry name {name!r}",
@@ -302,22 +333,15 @@ class CalibrationStore:
         clash = [e for e in self._entries if e.name == name and e.kind != kind]
         if clash:
             raise RigError(f"{name!r} already names a {clash[0].kind} entry", "choose another name")
-        columns = value_columns(kind)
-        w, v = validate_spectrum(wavelengths, values, source=f"{kind} {name!r}")
-        if v.shape[1] != len(columns):
-            raise RigError(
-                f"{kind} {name!r} has {v.shape[1]} value columns",
-                f"a {kind} needs {len(columns)} ({', '.join(columns)})",
-            )
         version = 1 + max((e.version for e in self._entries if e.name == name), default=0)
         slug = re.sub(r"[^A-Za-z0-9._+-]", "-", name.replace("/", "__").replace(" ", "_"))
         if any(e.file.startswith(f"{kind}s/{slug}.v") for e in self._entries if e.name != name):
             slug += "-" + hashlib.sha256(name.encode()).hexdigest()[:8]  # "a b" vs "a_b"
-        rel = f"{kind}s/{slug}.v{version}.csv"
+        rel = f"{kind}s/{slug}.v{version}.{suffix}"
         path = self.root / rel
         if path.exists():
             raise RigError(f"{path} exists but is not in the index", "move it away, then add again")
-        write_spectrum_csv(path, w, v, columns)
+        write(path)
         prov = {k: v for k, v in dict(provenance).items() if v is not None}
         entry = Entry(
             name=name,
@@ -355,6 +379,32 @@ class CalibrationStore:
     ) -> Entry:
         """Add a camera sensitivity (M, 3); an existing name gets a new version."""
         return self._add(name, "camera", np.asarray(wavelengths_nm), np.asarray(rgb), provenance)
+
+    def add_flat_field(
+        self, name: str, flat: FlatField, provenance: Mapping[str, Any]
+    ) -> Entry:
+        """Add a flat field (``flat_fields/NAME.vN.yaml``); an existing name gets a new version."""
+        text = yaml.safe_dump(flat.to_dict(), sort_keys=False, allow_unicode=True)
+
+        def write(path: Path) -> None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_bytes_atomically(path, text.encode("utf-8"))
+
+        with self._changing("rig calibrate flat-field"):
+            self._entries = self._read_index()
+            return self._add_file_unlocked(name, "flat_field", "yaml", write, provenance)
+
+    def flat_field(self, name: str, version: int | None = None) -> tuple[Entry, FlatField]:
+        """The flat field ``name`` (latest version unless ``version``), its file hash checked."""
+        entry = self.entry(name, version, kind="flat_field")
+        path = self._checked_file(entry)
+        try:
+            data = load_yaml(path.read_text(encoding="utf-8"))
+        except (yaml.YAMLError, UnicodeDecodeError, OSError) as error:
+            raise RigError(
+                f"cannot read flat field {path}: {error}", "restore it or make it again"
+            ) from error
+        return entry, FlatField.from_dict(data, str(path))
 
     def remove(self, name: str, version: int | None = None) -> list[Entry]:
         """Remove one version (or every version) of ``name`` and its files."""

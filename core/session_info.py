@@ -101,6 +101,16 @@ class PlanInfo:
 
 
 @dataclass(frozen=True)
+class FlatFieldChoice:
+    """``calibration.flat_field``: the snapshot's flat-field entry and version, and how it
+    was made (``method``: white card, lensfun)."""
+
+    entry: str
+    version: int
+    method: str = ""
+
+
+@dataclass(frozen=True)
 class CalibrationInfo:
     """``calibration``: the store entries the session's snapshot in ``calibration/`` holds."""
 
@@ -108,6 +118,7 @@ class CalibrationInfo:
     store: str | None = None
     camera: str | None = None
     lights: Mapping[str, str] = field(default_factory=dict)  # illumination -> store entry
+    flat_field: FlatFieldChoice | None = None  # the lens fall-off correction decode applies
 
 
 @dataclass(frozen=True)
@@ -235,7 +246,21 @@ def _calibration(read: _Reader) -> CalibrationInfo:
         store=read.text("calibration.store"),
         camera=read.text("calibration.camera"),
         lights={str(k): str(v) for k, v in lights.items()},
+        flat_field=_flat_field(read),
     )
+
+
+def _flat_field(read: _Reader) -> FlatFieldChoice | None:
+    flat = read.get("calibration.flat_field")
+    if flat is None:
+        return None
+    want = "{entry: NAME, version: N, method: ...}"
+    if not isinstance(flat, Mapping) or "entry" not in flat:
+        raise read.bad("calibration.flat_field", flat, want)
+    version = read.whole("calibration.flat_field.version", positive=True)
+    if version is None:
+        raise read.bad("calibration.flat_field", flat, want)
+    return FlatFieldChoice(str(flat["entry"]), version, str(flat.get("method") or ""))
 
 
 def _intrinsics(read: _Reader) -> CameraIntrinsics | None:

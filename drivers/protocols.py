@@ -139,6 +139,30 @@ class WhiteReferenceSource(Protocol):
     ) -> WhiteReference: ...
 
 
+@dataclass
+class WhiteCard:
+    """A diffuse white card filling a camera's frame, lit by the rig's light: the flat-field
+    target. It faces the camera ``distance_m`` along its axis, the light at ``light_offset_m``
+    in the camera frame, so the light's own fall-off on it is known; ``focal_px`` the camera's
+    focal length in pixels."""
+
+    camera: Camera
+    light: LightSource
+    distance_m: float
+    light_offset_m: tuple[float, float, float]
+    focal_px: float
+    description: str
+    close: Callable[[], None]
+
+
+@runtime_checkable
+class WhiteCardSource(Protocol):
+    """A device that can put a white card in front of its camera by itself, at a different
+    place on the card for each ``position`` (no person holds the card)."""
+
+    def white_card(self, position: int) -> WhiteCard: ...
+
+
 @runtime_checkable
 class NamedSensitivity(Protocol):
     """A camera whose spectral sensitivity is a built-in one, known by name."""

@@ -136,6 +136,7 @@ class CalibrationChoice:
     camera: str
     store: str = "default"  # a directory, or "default" for the built-in store
     lights: Mapping[str, str] = field(default_factory=dict)  # illumination -> light SPD entry
+    flat_field: str | None = None  # the store's flat-field entry decode divides by (None: none)
 
 
 @dataclass(frozen=True)

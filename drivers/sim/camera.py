@@ -1,7 +1,8 @@
 """Simulated RGB camera: renders the scene with the one forward model, adds sensor noise,
 mosaics (Bayer) and writes a real DNG.
 
-Per frame: linear image ``y`` (forward model, anti-aliased) -> raw
+Per frame: linear image ``y`` (forward model, anti-aliased) -> times the lens's fall-off when
+``vignetting`` asks for one (:class:`VignettingConfig`) -> raw
 ``black + y · (white − black) · exposure_s · iso / 100`` (docs/architecture.md, Linear image
 values, read backwards) -> shot noise (Poisson in electrons) + read noise (Gaussian, DN) ->
 rounded, clipped to ``[0, white]`` (saturation is real) -> Bayer mosaic -> DNG. Geometry
@@ -41,6 +42,29 @@ from reconstruct.model.raycast import RayCaster
 
 
 @dataclass(frozen=True)
+class VignettingConfig:
+    """The ``camera.vignetting`` section: a lens that darkens towards the corners. ``cos4``:
+    natural fall-off, cos⁴ of the angle off the axis; ``extra``: a lens's own fall-off on top,
+    ``1 − extra · r²`` with r = 1 at the corners."""
+
+    cos4: bool = False
+    extra: float = bounded(0.0, min=0.0, max=0.95)
+
+    def gain(self, intrinsics: Intrinsics) -> np.ndarray:
+        """The fall-off (H, W) at pixel centres, 1 on the axis."""
+        width, height = intrinsics.width, intrinsics.height
+        fx = float(intrinsics.K[0, 0])
+        cx, cy = float(intrinsics.K[0, 2]), float(intrinsics.K[1, 2])
+        x = (np.arange(width) + 0.5) - cx
+        y = (np.arange(height) + 0.5) - cy
+        d2 = y[:, None] ** 2 + x[None, :] ** 2
+        gain = np.ones((height, width))
+        if self.cos4:
+            gain *= (fx**2 / (fx**2 + d2)) ** 2
+        return gain * (1.0 - self.extra * d2 / ((width**2 + height**2) / 4.0))
+
+
+@dataclass(frozen=True)
 class SensorConfig:
     """The ``camera`` section of a sim profile (defaults: a 640x480 14-bit RGGB camera)."""
 
@@ -60,6 +84,7 @@ class SensorConfig:
     make: str = "spectral-rig"
     model: str = "SimCam 14-bit"
     serial: str = "SIM-CAM-0001"
+    vignetting: VignettingConfig | None = None  # None: an ideal lens
 
     def __post_init__(self) -> None:
         if self.width % 2 or self.height % 2:
@@ -238,6 +263,8 @@ class SimCamera:
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
         linear = self.render_linear()
+        if self.sensor.vignetting is not None:
+            linear = linear * self.sensor.vignetting.gain(self.intrinsics)[..., None]
         mosaic = self.expose(linear, stem)
         s = self.sensor
         spd = self.light.spd()

@@ -1,13 +1,14 @@
 """The devices of one :class:`~drivers.sim.rig.SimRig`: the plain simulated devices plus the
 optional capabilities (:mod:`drivers.protocols`) the rig gives every one of them — it moves
-itself, knows its truth and sets up a white reference — so a plan finds them by type."""
+itself, knows its truth, sets up a white reference and a white card — so a plan finds them
+by type."""
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from drivers.protocols import WhiteReference
+from drivers.protocols import WhiteCard, WhiteReference
 from drivers.sim.camera import SimCamera
 from drivers.sim.light import SimLight
 from drivers.sim.projector import SimProjector
@@ -18,7 +19,8 @@ if TYPE_CHECKING:
 
 
 class RigMember:
-    """SelfPositioning, GroundTruthSource and WhiteReferenceSource, answered by the rig."""
+    """SelfPositioning, GroundTruthSource, WhiteReferenceSource and WhiteCardSource, answered
+    by the rig."""
 
     rig: SimRig
 
@@ -37,6 +39,11 @@ class RigMember:
         from drivers.sim.reference import chart_reference
 
         return chart_reference(self.rig, distance_m, region)
+
+    def white_card(self, position: int) -> WhiteCard:
+        from drivers.sim.white_card import white_card
+
+        return white_card(self.rig, position)
 
 
 class RigCamera(RigMember, SimCamera):

@@ -8,6 +8,8 @@ Built-in scenes (all seeded, deterministic):
 * ``torus``: a bumpy torus (6 cm ring, 2.5 cm tube); concavities and self-shadowing, for
   evaluation on a second shape.
 * ``chart``: a flat 6x4 ColorChecker card in the z = 0 plane facing +z (2-D checks).
+* ``card``: a large diffuse white card (80 cm square) in the z = 0 plane facing +z, with a
+  faint paper texture (±3 %): the flat-field target (:mod:`drivers.sim.white_card`).
 
 Ground truth is saved as ``mesh.ply`` + ``reflectance.npy`` (V, N_λ) + ``scene.yaml``.
 """
@@ -27,8 +29,11 @@ from calibration.grid import DEFAULT_GRID, SpectralGrid
 from core.errors import RigError
 from core.files import atomic_output, write_bytes_atomically
 
-SCENES = ("blob", "torus", "chart")
+SCENES = ("blob", "torus", "chart", "card")
 _CHART_BORDER = 0.03  # reflectance of the card between patches (near black)
+CARD_SIDE_M = 0.8
+CARD_WHITE = 0.9
+CARD_TEXTURE = 0.03  # RMS of the white card's texture, relative
 
 
 @dataclass(frozen=True)
@@ -189,6 +194,22 @@ def _chart(resolution_m: float = 0.001) -> tuple[np.ndarray, np.ndarray, np.ndar
     return v, f.astype(np.int64), patch
 
 
+def _card(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The white card: a square grid of 4 mm cells and its texture (reflectance factor)."""
+    n = int(round(CARD_SIDE_M / 0.004))
+    xs = np.linspace(-CARD_SIDE_M / 2, CARD_SIDE_M / 2, n + 1)
+    X, Y = np.meshgrid(xs, xs, indexing="ij")
+    v = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], axis=1)
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    a = i * (n + 1) + j
+    b, c, d = a + (n + 1), a + (n + 2), a + 1
+    f = np.concatenate(
+        [np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)]
+    )
+    texture = 1.0 + CARD_TEXTURE * _fractal(v, rng, [150.0, 400.0])
+    return v, f.astype(np.int64), texture
+
+
 def make_scene(
     name: str = "blob", seed: int = 0, subdivisions: int = 7, grid: SpectralGrid = DEFAULT_GRID
 ) -> Scene:
@@ -205,6 +226,10 @@ def make_scene(
         patch = _paint(v, 48, rng)
     elif name == "chart":
         v, f, patch = _chart()
+    elif name == "card":
+        v, f, texture = _card(rng)
+        refl = np.clip(CARD_WHITE * texture, 0.0, 1.0)[:, None] * np.ones(grid.size)
+        return Scene(name, v, f, refl, grid.wavelengths, np.full(len(v), -1))
     else:
         raise RigError(f"unknown sim scene {name!r}", f"use one of {', '.join(SCENES)}")
     _, cc = colorchecker_reflectances(grid)

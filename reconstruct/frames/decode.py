@@ -2,9 +2,10 @@
 
 Values follow docs/architecture.md (Linear image values):
 ``y = (raw - black) / (white - black) / (exposure_s * iso / 100)``, demosaiced in camera RGB with
-no white balance, colour matrix or gamma (RAW files are read by :mod:`reconstruct.frames.raw`). A
-pixel is saturated when any mosaic sample in its demosaic neighbourhood is at or near the white
-level; such pixels are never used.
+no white balance, colour matrix or gamma (RAW files are read by :mod:`reconstruct.frames.raw`),
+divided by the session's flat field when it names one (``calibration.flat_field``: the lens's
+fall-off, :mod:`calibration.flat_field`). A pixel is saturated when any mosaic sample in its
+demosaic neighbourhood is at or near the white level; such pixels are never used.
 
 Outputs in ``recon/decoded/``: ``<frame>.npy`` (H x W x 3, float16, or float32 beyond its
 range), ``<frame>_sat.npy`` (bool mask), ``index.json`` (frame -> view, illumination, files,
@@ -28,6 +29,8 @@ import tifffile
 from rich.progress import track
 from scipy.ndimage import maximum_filter
 
+from calibration.flat_field import FlatField
+from calibration.store import CalibrationStore
 from core.config import bounded, from_mapping
 from core.errors import RigError
 from core.files import atomic_output, write_bytes_atomically
@@ -140,8 +143,37 @@ def decode_linear(
     return (values - black) / (white - black), mask
 
 
+class FlatFieldDivider:
+    """The session's flat field, its gain map made once per image size."""
+
+    def __init__(self, flat: FlatField, where: str) -> None:
+        self.flat = flat
+        self.where = where
+        self._maps: dict[tuple[int, int], np.ndarray] = {}
+
+    def __call__(self, rgb: np.ndarray) -> np.ndarray:
+        height, width = rgb.shape[:2]
+        if (width, height) not in self._maps:
+            self._maps[width, height] = self.flat.gain(width, height, self.where)
+        return rgb / self._maps[width, height]
+
+
+def session_flat_field(session: Session) -> tuple[FlatFieldDivider | None, list[Path]]:
+    """The flat field session.yaml names (None without one) and its file in the snapshot."""
+    choice = session.info.calibration.flat_field
+    if choice is None:
+        return None, []
+    store = CalibrationStore(session.calibration_dir)
+    entry, flat = store.flat_field(choice.entry, choice.version)
+    where = f"flat field {entry.name!r} v{entry.version}"
+    return FlatFieldDivider(flat, where), [store.root / entry.file]
+
+
 def _decode_one(
-    session: Session, record: FrameRecord, conf: DecodeConfig
+    session: Session,
+    record: FrameRecord,
+    conf: DecodeConfig,
+    flat: FlatFieldDivider | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     path = session.root / record.path
     if path.suffix.lower() in LINEAR_SUFFIXES:
@@ -151,6 +183,11 @@ def _decode_one(
     if record.exposure_s <= 0 or record.iso <= 0:
         raise ValueError(f"exposure_s={record.exposure_s} and iso={record.iso} must be positive")
     rgb /= record.exposure_s * record.iso / 100.0
+    if flat is not None:
+        try:
+            rgb = flat(rgb)
+        except RigError as error:  # a frame of another size: that frame, not the session
+            raise ValueError(error.problem) from error
     if not np.all(np.isfinite(rgb)):
         raise ValueError("decoded values are not finite")
     return rgb, mask
@@ -195,7 +232,9 @@ def _bad(conf: DecodeConfig, bad: dict[str, str]) -> None:
         )
 
 
-def _decode(session: Session, conf: DecodeConfig, out_dir: Path) -> None:
+def _decode(
+    session: Session, conf: DecodeConfig, out_dir: Path, flat: FlatFieldDivider | None
+) -> None:
     if not session.frames:
         raise RigError(f"{session.root} has no frames in its manifest", "capture a session first")
     problems = verify_frames(session.root, session.frames)
@@ -207,7 +246,7 @@ def _decode(session: Session, conf: DecodeConfig, out_dir: Path) -> None:
         [r for r in session.frames if r.path not in bad], description="decoding frames"
     ):
         try:
-            rgb, mask = _decode_one(session, record, conf)
+            rgb, mask = _decode_one(session, record, conf, flat)
         except (rawpy.LibRawError, OSError, ValueError) as exc:
             bad[record.path] = f"cannot be decoded: {exc}"
             _bad(conf, {record.path: bad[record.path]})
@@ -266,6 +305,8 @@ def run(conf: DecodeConfig | Mapping[str, Any], session: Session | Path, out_dir
     root = session.root
     # what `rig session verify` and `rig capture --resume` refuse, reconstruction refuses too
     check_session(root, session.frames, root / MANIFEST_FILE)
-    inputs = [root / MANIFEST_FILE] + [root / r.path for r in session.frames]
-    run_stage("decode", asdict(conf), inputs, out_dir, lambda: _decode(session, conf, out_dir))
+    flat, flat_files = session_flat_field(session)
+    inputs = [root / MANIFEST_FILE, *flat_files] + [root / r.path for r in session.frames]
+    settings = {**asdict(conf), "flat_field": None if flat is None else flat.where}
+    run_stage("decode", settings, inputs, out_dir, lambda: _decode(session, conf, out_dir, flat))
     return out_dir

@@ -115,6 +115,14 @@ def session_spectra(session: Session, names: list[str]) -> tuple[np.ndarray, dic
     return camera, spds
 
 
+def flat_field_report(session: Session) -> dict[str, Any] | str:
+    """The report's ``flat_field``: the lens fall-off correction decode applied, or none."""
+    choice = session.info.calibration.flat_field
+    if choice is None:
+        return "none: frames not corrected for lens fall-off"
+    return {"entry": choice.entry, "version": choice.version, "method": choice.method}
+
+
 def _scaled(intr: Intrinsics, width: int, height: int) -> Intrinsics:
     """Intrinsics of another image size (SfM may run on downscaled images)."""
     if (intr.width, intr.height) == (width, height):
@@ -462,6 +470,7 @@ def _run(
         "initial_mesh": str(front.mesh_path),
         "illuminations": sorted({k[1] for k in front.frames}),
         "skipped_frames": dict(front.skipped_frames),
+        "flat_field": flat_field_report(session),
         "timings_s": {"front": t_front, "load_frames": t_load},
         "peak_rss_mb": peaks,
     }

@@ -19,6 +19,7 @@ from drivers.protocols import (
     Projector,
     SelfPositioning,
     Spectrometer,
+    WhiteCardSource,
     WhiteReferenceSource,
 )
 from rig.profile import Profile
@@ -58,6 +59,12 @@ class RigDevices:
     def white_reference_source(self) -> WhiteReferenceSource | None:
         """The device that sets up a white reference itself; None: the person places one."""
         return next((d for d in self._devices() if isinstance(d, WhiteReferenceSource)), None)
+
+    @property
+    def white_card_source(self) -> WhiteCardSource | None:
+        """The device that puts a white card in front of the camera itself; None: the person
+        holds one."""
+        return next((d for d in self._devices() if isinstance(d, WhiteCardSource)), None)
 
     def goto_view(self, view: int) -> None:
         """A self-positioning rig moves itself; a real rig is moved by the person."""

@@ -9,7 +9,7 @@ import platform
 import shutil
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
@@ -22,6 +22,9 @@ from core.yamlio import load_yaml
 from rig import __version__
 from rig.capture.frames import INCOMING
 from rig.profile import CalibrationChoice, Profile, parse_profile
+
+if TYPE_CHECKING:
+    from calibration.store import CalibrationStore
 
 FORMAT_VERSION = 1
 GROUND_TRUTH_DIR = "ground_truth"  # sim sessions only: the true scene, for evaluation
@@ -172,6 +175,29 @@ def snapshot_calibration(
             f"{profile_source}: calibration entry missing: {exc.problem}",
             "add it with `rig calibrate wizard` or fix calibration.lights",
         ) from exc
+    flat = _flat_field_record(choice, store, profile_source)
     if choice.store != "default":
         store.copy_to(dest)
-    return {"store": choice.store, "snapshot": CALIBRATION_DIR, **entries}
+    return {"store": choice.store, "snapshot": CALIBRATION_DIR, **entries, "flat_field": flat}
+
+
+def _flat_field_record(
+    choice: CalibrationChoice, store: CalibrationStore, profile_source: str
+) -> dict[str, Any] | None:
+    """session.yaml's ``calibration.flat_field``: the entry decode divides the frames by."""
+    if choice.flat_field is None:
+        return None
+    if choice.store == "default":
+        raise RigError(
+            f"{profile_source}: calibration.flat_field {choice.flat_field!r} needs a calibration "
+            "store of your own (the built-in one holds none)",
+            "set calibration.store to the store `rig calibrate flat-field` or the wizard wrote",
+        )
+    try:
+        entry, flat = store.flat_field(choice.flat_field)
+    except RigError as exc:
+        raise RigError(
+            f"{profile_source}: calibration.flat_field: {exc.problem}",
+            "make it with `rig calibrate flat-field` or `rig calibrate wizard`, or remove the key",
+        ) from exc
+    return {"entry": entry.name, "version": entry.version, "method": flat.method}

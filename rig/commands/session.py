@@ -177,6 +177,15 @@ def summarise(session: Session) -> list[str]:
         )
     else:
         rows.append(("calibration", "none recorded"))
+    flat = cal.flat_field
+    rows.append(
+        (
+            "flat field",
+            "none (frames not corrected for lens fall-off)"
+            if flat is None
+            else f"{flat.entry} v{flat.version} ({flat.method or 'unknown method'})",
+        )
+    )
     for check in info.exposure_checks.values():
         if isinstance(check, dict) and check.get("suggestion"):
             rows.append(("exposure", check["suggestion"]))

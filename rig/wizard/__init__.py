@@ -4,11 +4,15 @@
 file), plotted (:mod:`.lights`); 3. camera sensitivity (built-in or imported CSV,
 :mod:`.camera`); 4. radiometric scale from a photograph of a white reference of known
 reflectance at a measured distance facing the light (:mod:`.scale`, :mod:`.reference`);
-5. illumination selection report (:mod:`.selection`). Every step is scriptable with flags
-(``--yes``).
+5. illumination selection report (:mod:`.selection`). When the profile names a
+``calibration.flat_field`` entry, a flat-field step photographs a white card filling the frame
+at several positions and stores the lens's fall-off under that name (:mod:`.flat_field`).
+Every step is scriptable with flags (``--yes``).
 
 A device that can set up a white reference itself (``WhiteReferenceSource``: the simulator's
-ColorChecker chart, seen head-on with the light at the camera) replaces the person's tile.
+ColorChecker chart, seen head-on with the light at the camera) replaces the person's tile;
+one that can put a white card in front of its camera (``WhiteCardSource``) replaces the
+person's card.
 """
 
 from __future__ import annotations
@@ -80,6 +84,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--noise", type=number(float, min=0, max=1), default=0.01,
                         help="selection noise (fraction)")
+    flat = parser.add_argument_group(
+        "flat field (when the profile names calibration.flat_field)"
+    )
+    flat.add_argument("--skip-flat-field", action="store_true", help="leave the flat field out")
+    flat.add_argument(
+        "--flat-field-positions", type=number(int, min=1, max=100), default=4, metavar="N",
+        help="white card positions to average (default 4)",
+    )
+    flat.add_argument("--card-distance-m", type=number(float, above=0, max=100),
+                      help="camera to white card, metres")
+    flat.add_argument("--focal-px", type=number(float, above=0, max=1e6),
+                      help="the camera's focal length in pixels")
+    flat.add_argument(
+        "--flat-field-diffuser", action="store_true",
+        help="an opal diffuser over the lens instead of a card (evenly lit: no geometry)",
+    )
     parser.add_argument(
         "--plots", metavar="DIR", help="where to write PNG plots (default STORE/plots)"
     )
@@ -95,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
     from rig.profile import load_profile
     from rig.wizard.camera import choose_camera
     from rig.wizard.common import Ask
+    from rig.wizard.flat_field import measure_flat_field
     from rig.wizard.lights import measure_lights, parse_imports, plot_light
     from rig.wizard.reference import parse_region
     from rig.wizard.scale import scale_lights
@@ -109,6 +130,13 @@ def run(args: argparse.Namespace) -> int:
     parse_region(args.reference_region)  # bad flags fail before any measurement
     if args.camera:
         defaults.camera_source_description(args.camera)
+    flat_entry = None if args.skip_flat_field or profile.calibration is None else (
+        profile.calibration.flat_field
+    )
+    if args.flat_field_positions < 1:
+        raise RigError(
+            f"--flat-field-positions {args.flat_field_positions}", "give at least 1 position"
+        )
     kinds = ("camera", "light", "projector") + (
         ("spectrometer",) if len(imports) < len(profile.plan.illuminations) else ()
     )
@@ -130,10 +158,21 @@ def run(args: argparse.Namespace) -> int:
             console.print("radiometric scale skipped: SPDs stay relative", style="yellow")
         else:
             scale_lights(args, profile, devices, lights, camera_grid, ask, console)
+        flat = None
+        if flat_entry is not None:
+            flat = measure_flat_field(args, profile, devices, ask, console)
     finally:
         devices.close()
     store = CalibrationStore(store_root)
     store.add_camera(camera_name, camera_w, camera_rgb, camera_prov)
+    if flat is not None and flat_entry is not None:
+        entry = store.add_flat_field(flat_entry, *flat)
+        corner = ", ".join(f"{g:.3f}" for g in flat[0].corner_gain())
+        console.print(
+            f"stored flat field '{entry.name}' v{entry.version} (corner gain R, G, B "
+            f"{corner}); decode divides the frames by it",
+            style="green",
+        )
     for light in lights:
         values = light.values * (light.scale or 1.0)
         entry = store.add_light(light.entry, light.wavelengths, values, light.provenance)

@@ -112,3 +112,19 @@ def test_opening_a_session_with_a_bad_value_fails_at_once(tmp_path: Path) -> Non
     (tmp_path / "session.yaml").write_text(yaml.safe_dump({"plan": {"views": -2}}))
     with pytest.raises(RigError, match=r"session\.yaml: `plan\.views` is -2"):
         Session.open(tmp_path)
+
+
+def test_flat_field_choice_is_typed_and_optional() -> None:
+    info = SessionInfo.from_mapping(
+        {"calibration": {"flat_field": {"entry": "flat/cam", "version": 2, "method": "lensfun"}}}
+    )
+    assert info.calibration.flat_field is not None
+    assert (info.calibration.flat_field.entry, info.calibration.flat_field.version) == (
+        "flat/cam",
+        2,
+    )
+    assert SessionInfo.from_mapping({"calibration": {"flat_field": None}}).calibration.flat_field \
+        is None
+    for bad in ("flat/cam", {"entry": "x"}, {"entry": "x", "version": 0}):
+        with pytest.raises(RigError, match="calibration.flat_field"):
+            SessionInfo.from_mapping({"calibration": {"flat_field": bad}})
