@@ -257,6 +257,13 @@ NUMBERS = [
          argv("calibrate", "camera", "--patches", "TMP/p.csv", "--lamp", "L", "--name", "C",
               "--white-level", "inf"),
          r"argument --white-level: inf"),
+    Case("bound-flat-field-aperture",
+         argv("calibrate", "flat-field", "--lensfun", "Canon EOS 5D Mark II", "--lens", "L",
+              "--focal", "50", "--aperture", "0.01"),
+         r"argument --aperture: 0\.01 .*\[0\.5, 256\]"),
+    Case("bound-wizard-card-distance",
+         argv("calibrate", "wizard", "--profile", "sim", "--yes", "--card-distance-m", "1e308"),
+         r"argument --card-distance-m: 1e308 .*<= 100"),
     Case("bound-view-port", argv("view", "TMP", "--port", "70000"),
          r"--port 70000 is not a port number"),
 ]
