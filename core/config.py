@@ -98,12 +98,12 @@ def from_mapping(cls: type[T], data: Any, where: str, key: str = "") -> T:
 
 
 def check_arguments(func: Callable[..., Any], options: Mapping[str, Any], where: str,
-                    skip: int = 0) -> None:
+                    skip: int = 0, bounds: Mapping[str, Mapping[str, Any]] | None = None) -> None:
     """``options`` checked as keyword arguments of ``func`` after its first ``skip`` parameters
     (a driver's settings from a profile): unknown names rejected with the nearest known one,
     required ones present, and each value against its annotation where that is a config type
-    (bool, numbers, str, ``Literal``, containers and unions of those); ``func`` checks the
-    rest."""
+    (bool, numbers, str, ``Literal``, containers and unions of those) and the bounds given for
+    its name (as :func:`bounded` takes them); ``func`` checks the rest."""
     params = list(inspect.signature(func).parameters.values())[skip:]
     named = [p for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
     names = [p.name for p in named]
@@ -124,7 +124,7 @@ def check_arguments(func: Callable[..., Any], options: Mapping[str, Any], where:
         hints = {}
     for name, value in options.items():
         if name in hints and _checkable(hints[name]):
-            parse_value(value, hints[name], where, name)
+            parse_value(value, hints[name], where, name, (bounds or {}).get(name))
 
 
 def _checkable(kind: Any) -> bool:

@@ -47,7 +47,7 @@ class InUse(RigError):
 class _Hold:
     fd: int
     depth: int
-    created: bool  # the folder was made for this hold: removed again if left empty
+    created: tuple[Path, ...]  # folders made for this hold, deepest first: removed if empty
 
 
 _local = threading.local()
@@ -174,11 +174,29 @@ def _release(folder: Path, hold: _Hold) -> None:
     except OSError:
         pass  # a read-only folder keeps the file; the kernel still drops the lock below
     os.close(hold.fd)
-    if hold.created:
+    _remove_empty(hold.created)
+
+
+def _make(folder: Path) -> tuple[Path, ...]:
+    """Make ``folder`` and its missing parents; the ones this call made, deepest first."""
+    missing = []
+    for path in (folder, *folder.parents):
+        if path.exists():
+            break
+        missing.append(path)
+    try:
+        folder.mkdir(parents=True)
+    except FileExistsError:  # another process made it meanwhile
+        return ()
+    return tuple(missing)
+
+
+def _remove_empty(made: tuple[Path, ...]) -> None:
+    for path in made:
         try:
-            folder.rmdir()
+            path.rmdir()
         except OSError:
-            pass  # not empty: the command left its work there
+            return  # not empty: the command left its work there
 
 
 @contextmanager
@@ -188,8 +206,8 @@ def locked(
     """Hold ``folder``'s lock for the block, as ``command`` (e.g. ``rig capture``).
 
     Another holder makes this raise :class:`InUse` at once, or after ``wait_s`` seconds of
-    waiting for it. ``create`` makes a missing folder (removed again if left empty);
-    otherwise a missing folder is a RigError."""
+    waiting for it. ``create`` makes a missing folder and its missing parents (removed again
+    if left empty); otherwise a missing folder is a RigError."""
     folder = Path(folder).expanduser().absolute()
     key = folder.resolve()  # one hold whichever link or relative path names the folder
     holds = _holds()
@@ -201,19 +219,11 @@ def locked(
         finally:
             hold.depth -= 1
         return
-    created = False
-    if create and not folder.exists():
-        try:
-            folder.mkdir(parents=True)
-            created = True
-        except FileExistsError:  # another process made it meanwhile
-            pass
+    created = _make(folder) if create and not folder.exists() else ()
     try:
         hold = _Hold(_acquire(folder, command, wait_s), 1, created)
     except BaseException:
-        if created:
-            with contextlib.suppress(OSError):  # the refusal matters, not this tidying
-                folder.rmdir()
+        _remove_empty(created)  # never raises: the refusal matters, not this tidying
         raise
     holds[key] = hold
     try:

@@ -96,11 +96,35 @@ def _build(
     """``cls(*args, **options)``, the profile's ``options`` checked against ``cls``'s
     annotations first (unknown, missing or mistyped keys are a RigError naming the key)."""
     log.debug("opening %s driver %s with %s", kind, driver, redact(options))
-    check_arguments(cls, options, f"{kind} driver {driver!r}", skip=len(args))
+    check_arguments(cls, options, f"{kind} driver {driver!r}", skip=len(args),
+                    bounds=OPTION_BOUNDS)
     return cls(*args, **options)
 
 
 Factory = Callable[[str, dict[str, Any], DeviceSet], Any]
+
+# Bounds of the numbers drivers take from a profile, by option name (the same meaning in every
+# driver): a value beyond them is a typo, refused before the device is asked to do it.
+OPTION_BOUNDS: dict[str, dict[str, float]] = {
+    "settle_s": {"min": 0, "max": 600},
+    "timeout_s": {"above": 0, "max": 86_400},
+    "stable_s": {"min": 0, "max": 3600},
+    "poll_s": {"above": 0, "max": 60},
+    "exposure_s": {"above": 0, "max": 3600},
+    "iso": {"above": 0, "max": 1e6},
+    "frame_count": {"min": 1, "max": 100_000},
+    "boot_tries": {"min": 1, "max": 100},
+    "busy_retries": {"min": 0, "max": 100},
+    "busy_backoff_s": {"min": 0, "max": 60},
+    "event_wait_ms": {"min": 1, "max": 600_000},
+    "start_address": {"min": 1, "max": 512},  # DMX slots
+    "display": {"min": 0, "max": 64},
+    "integration_time_s": {"above": 0, "max": 600},
+    "max_integration_s": {"above": 0, "max": 600},
+    "averages": {"min": 1, "max": 10_000},
+    "target_fraction": {"above": 0, "max": 1},
+    "saturation_fraction": {"above": 0, "max": 1},
+}
 
 
 def _with_transport(cls_path: str) -> Factory:
@@ -257,11 +281,16 @@ GROUND_TRUTH_DRIVERS = frozenset({"sim"})
 
 
 def check_simulation(section: Mapping[str, Any], source: str) -> None:
-    """Check a profile's ``sim`` section's trajectory when the profile loads (the simulated
-    rig reads the section only when it opens); errors name ``source`` and the key."""
-    if "trajectory" in section:
-        from drivers.sim.trajectory import TrajectoryConfig
+    """Check a profile's ``sim`` section (its numbers' bounds, its trajectory) when the profile
+    loads (the simulated rig reads the section only when it opens); errors name ``source`` and
+    the key."""
+    if not section:
+        return
+    from drivers.sim.rig import SimConfig
+    from drivers.sim.trajectory import TrajectoryConfig
 
+    from_mapping(SimConfig, section, source, "sim")
+    if "trajectory" in section:
         from_mapping(TrajectoryConfig, section["trajectory"], source, "sim.trajectory")
 
 KINDS = {"light": LIGHTS, "camera": CAMERAS, "projector": PROJECTORS, "spectrometer": SPECTROMETERS}

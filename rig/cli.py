@@ -18,6 +18,7 @@ from typing import NoReturn
 from core import cachedir, interrupts
 from core.errors import RigError
 from core.fserrors import fs_error, underlying_fs_error
+from core.text import printable
 from rig import __version__
 
 # Subcommand -> module in rig.commands exposing ``add_parser(subparsers)`` (``-`` -> ``_``).
@@ -44,7 +45,7 @@ class _Parser(argparse.ArgumentParser):
     """argparse with its errors on one line (argparse prints the usage block first)."""
 
     def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message} — see `{self.prog} --help`\n")
+        self.exit(2, f"{self.prog}: error: {printable(message)} — see `{self.prog} --help`\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -80,7 +81,16 @@ def configure_logging(verbosity: int, debug: bool) -> None:
         level = logging.DEBUG
     handler = RichHandler(console=Console(stderr=True), show_path=False)
     handler.setLevel(level)
+    handler.setFormatter(_OneLineFormatter())
     logging.basicConfig(level=level, format="%(name)s: %(message)s", handlers=[handler], force=True)
+
+
+class _OneLineFormatter(logging.Formatter):
+    """A log message stays one line whatever the paths and names it holds (tracebacks, added
+    after the message, keep their lines)."""
+
+    def formatMessage(self, record: logging.LogRecord) -> str:
+        return printable(super().formatMessage(record))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -133,15 +143,16 @@ def _report(error: Exception, parsed: list[argparse.Namespace]) -> int:
     cause = underlying_fs_error(error)
     if cause is not None and not isinstance(error, RigError):  # a full disk: the user's to fix
         error = fs_error(cause)
-    # Text.assemble: `[gphoto2]` or `[/x]` in a message is printed, not taken as markup
+    # Text.assemble: `[gphoto2]` or `[/x]` in a message is printed, not taken as markup;
+    # printable: a newline or escape sequence in a name does not break the one line
     if isinstance(error, RigError):
-        err.print(Text.assemble(("error:", "bold red"), " ", str(error)), highlight=False)
+        err.print(Text.assemble(("error:", "bold red"), " ", printable(error)), highlight=False)
         return 2
     if not debug:
         err.print(
             Text.assemble(
                 ("internal error:", "bold red"),
-                f" {type(error).__name__}: {error} "
+                f" {type(error).__name__}: {printable(error)} "
                 "— run again with --debug for the traceback and report it",
             ),
             highlight=False,
@@ -160,7 +171,7 @@ def _stopped(parsed: list[argparse.Namespace]) -> int:
             hint = stop_hint(parsed[0])
         except Exception:  # the stop itself is what must be reported
             hint = ""
-    print(interrupts.stop_line(signum, hint), file=sys.stderr, flush=True)
+    print(printable(interrupts.stop_line(signum, hint)), file=sys.stderr, flush=True)
     return interrupts.exit_status(signum)
 
 

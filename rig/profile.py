@@ -27,6 +27,8 @@ from reconstruct.poses.board import BoardSpec
 DEVICE_KINDS = ("light", "camera", "projector", "spectrometer")
 # Drivers the capture routes itself; the rest go to ``drivers.registry``.
 MAX_VIEWS = 1000  # more than any turntable or handheld session takes
+# an hour's exposure and ISO 1,000,000 are beyond any camera the rig drives
+CAMERA_SETTING_MAX = {"exposure_s": 3600.0, "iso": 1e6}
 
 
 @dataclass(frozen=True)
@@ -225,10 +227,10 @@ def parse_profile(data: Any, source: str) -> Profile:
     _check_illuminations(top.illuminations, source)
     plan = _plan(top.plan, top.illuminations, devices, source)
     _check_light_mount(top.light_mount, source)
-    for key in ("exposure_s", "iso"):
+    for key, highest in CAMERA_SETTING_MAX.items():
         if key in top.camera_settings:
             parse_value(top.camera_settings[key], float, source, f"camera_settings.{key}",
-                        {"above": 0})
+                        {"above": 0, "max": highest})
     _check_camera_pairs(top.known_distances.camera_pairs, plan.views, source)
     if top.poses == "known" and not any(
         d.get("driver") in GROUND_TRUTH_DRIVERS for d in devices.values()

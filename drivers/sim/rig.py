@@ -72,14 +72,14 @@ class SimConfig:
     merged in."""
 
     scene: str = "blob"
-    scene_seed: int | None = None  # None: the rig's seed
+    scene_seed: int | None = bounded(None, min=0, max=10**9)  # None: the rig's seed
     subdivisions: int = bounded(7, min=0, max=8)  # 8: ~655k vertices on the blob
     views: int | None = bounded(None, min=1, max=MAX_VIEWS)
     light_offset_m: tuple[float, float, float] | None = bounded(None, min=-10, max=10)
     trajectory: dict[str, Any] | None = None
     camera: SensorConfig = field(default_factory=SensorConfig)
     projector: ProjectorConfig = field(default_factory=ProjectorConfig)
-    illuminations: dict[str, dict[str, float]] | None = None
+    illuminations: dict[str, dict[str, float]] | None = bounded(None, min=0, max=1)
     ground: GroundConfig | None = None
     ambient: AmbientConfig | None = None
 

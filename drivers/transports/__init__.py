@@ -11,24 +11,35 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from core.config import parse_value
 from core.errors import RigError
 from drivers.transports.base import NotAnsweringError, Transport, redact
 
 __all__ = ["NotAnsweringError", "Transport", "open_transport", "redact", "TRANSPORT_TYPES"]
 
 TRANSPORT_TYPES = ("serial", "hid", "usb", "tcp", "subprocess", "replay")
+# The numbers a transport section may hold: a timeout of an hour or a port beyond 65535 is a
+# typo, refused before anything is opened (a socket raises OverflowError on such a port).
+NUMBERS: dict[str, tuple[type, dict[str, float]]] = {
+    "timeout_s": (float, {"above": 0, "max": 3600}),
+    "port": (int, {"min": 1, "max": 65_535}),  # tcp; a serial port is a name
+    "baudrate": (int, {"min": 50, "max": 4_000_000}),
+}
 
 
 def _int(value: Any, key: str) -> int:
-    """VID/PID may be written 0x16c0, "16c0" or 5824 in YAML."""
-    if isinstance(value, int):
-        return value
+    """VID/PID may be written 0x16c0, "16c0" or 5824 in YAML; USB ids are 16 bits."""
     try:
-        return int(str(value), 16)
+        number = value if isinstance(value, int) and not isinstance(value, bool) else int(
+            str(value), 16)
     except ValueError as error:
         raise RigError(
             f"transport.{key} = {value!r} is not a number", "write it like 0x16c0"
         ) from error
+    if not 0 <= number <= 0xFFFF:
+        raise RigError(f"transport.{key} = {value!r} is not a USB id",
+                       "allowed: 0x0000 to 0xffff, e.g. 0x16c0")
+    return number
 
 
 def open_transport(spec: Mapping[str, Any], where: str = "transport") -> Transport:
@@ -37,6 +48,9 @@ def open_transport(spec: Mapping[str, Any], where: str = "transport") -> Transpo
     kind = options.pop("type", None) or options.pop("kind", None)  # profiles may say `kind:`
     options.pop("kind", None)
     record = options.pop("record", None)
+    for key, (number, bounds) in NUMBERS.items():
+        if key in options and not (key == "port" and kind != "tcp"):
+            parse_value(options[key], number, f"{where} has a bad value", key, bounds)
     try:
         timeout = float(options.pop("timeout_s", 1.0))
         transport = _open(kind, options, timeout)

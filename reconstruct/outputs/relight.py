@@ -76,9 +76,9 @@ class CameraFile:
     width: int = bounded(min=1, max=32_768)
     height: int = bounded(min=1, max=32_768)
     focal_px: float = bounded(above=0, max=1e6)
-    eye: tuple[float, float, float] = bounded()
-    target: tuple[float, float, float] = bounded()
-    up: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    eye: tuple[float, float, float] = bounded(min=-1000, max=1000)
+    target: tuple[float, float, float] = bounded(min=-1000, max=1000)
+    up: tuple[float, float, float] = bounded((0.0, 0.0, 1.0), min=-1000, max=1000)
 
 
 def load_camera_file(path: Path) -> Camera:

@@ -24,7 +24,7 @@ def new_progress(console: Console | None = None, transient: bool = False) -> Pro
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
-        TextColumn("{task.fields[note]}"),
+        TextColumn("{task.fields[note]}", markup=False),  # notes name sessions and files
         console=console,
         transient=transient,
     )

@@ -11,6 +11,7 @@ from typing import Any
 from distributed import as_completed
 from rich.console import Console
 
+from core.text import printable
 from reconstruct.stages.progress import new_progress
 from rig.batch.cluster import open_client
 from rig.batch.task import Outcome, reconstruct_session
@@ -53,7 +54,7 @@ def run_batch(
             bar.update(
                 task,
                 advance=1,
-                note=f"{Path(name).name}: {outcome.status}"
+                note=printable(f"{Path(name).name}: {outcome.status}")
                 + (f" ({failed} failed)" if failed else ""),
             )
     return [outcomes[n] for n in names]

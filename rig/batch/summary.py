@@ -11,6 +11,7 @@ from rich.table import Table
 from rich.text import Text
 
 from core.files import atomic_output
+from core.text import printable
 from rig.batch.task import Outcome
 
 FIGURES = (
@@ -94,7 +95,8 @@ def table(outcomes: Sequence[Outcome]) -> Table:
         )
     for row in data:
         out.add_row(
-            *(Text(row[c], style=STYLE.get(row[c], "") if c == "status" else "") for c in shown)
+            *(Text(printable(row[c]), style=STYLE.get(row[c], "") if c == "status" else "")
+              for c in shown)
         )
     return out
 

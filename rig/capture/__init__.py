@@ -8,13 +8,14 @@ from pathlib import Path
 from typing import Any
 
 from rich.console import Console
-from rich.markup import escape
+from rich.text import Text
 
 from core.errors import RigError
 from core.lock import locked
 from core.manifest import FrameRecord
 from core.session import POSES_DIR, SESSION_FILE
 from core.session_info import PlanInfo, SessionInfo
+from core.text import printable
 from rig.capture.devices import Ask, RigDevices, open_devices
 from rig.capture.engine import CaptureStopped, RunEngine, RunState
 from rig.capture.resume import prepare_resume
@@ -32,6 +33,7 @@ from rig.capture.session_dir import (
     write_info,
 )
 from rig.capture.trust import confirm_session_devices, stdin_is_tty
+from rig.console import console as plain_console
 from rig.plans import frame_list
 from rig.profile import Profile, load_profile
 
@@ -95,7 +97,7 @@ def _capture(
     notes: str,
     trust_devices: bool,
 ) -> Path:
-    console = console or Console(stderr=True)
+    console = console or plain_console(stderr=True)
     interactive = ask is not None or stdin_is_tty()
     if not yes and ask is None:
         ask = console.input
@@ -103,7 +105,7 @@ def _capture(
     if resume and (out / SESSION_FILE).is_file():
         info = read_info(out)
         if profile is not None and not isinstance(profile, Profile):
-            console.print("[dim]resuming with the session's own profile snapshot[/]")
+            console.print("resuming with the session's own profile snapshot", style="dim")
         profile = snapshot_profile(out)
         typed = SessionInfo.from_mapping(info, str(out / SESSION_FILE))
         recorded = typed.plan
@@ -185,12 +187,13 @@ def _capture(
             write_info(out, info)
     finally:
         devices.close()
-    console.print(f"[green]capture complete:[/] {len(state.done)} frames in {out}")
+    console.print(Text.assemble(("capture complete:", "green"),
+                                f" {len(state.done)} frames in {printable(out)}"))
     return out
 
 
 def _warner(console: Console) -> Callable[[str], None]:
-    return lambda text: console.print(f"[yellow]resume:[/] {escape(text)}", highlight=False)
+    return lambda text: console.print(Text.assemble(("resume:", "yellow"), " ", printable(text)))
 
 
 def _start_session(

@@ -93,6 +93,9 @@ class RigDevices:
                     continue
 
 
+VALUE_ERRORS = (ValueError, TypeError, ArithmeticError, MemoryError)
+
+
 @contextmanager
 def device_errors(kind: str, driver: str, action: str) -> Iterator[None]:
     """Re-raise anything a device throws as a RigError naming it (RigErrors pass through)."""
@@ -103,9 +106,14 @@ def device_errors(kind: str, driver: str, action: str) -> Iterator[None]:
     except KeyboardInterrupt:
         raise
     except Exception as exc:
+        fix = (  # a value no device can take is not cured by re-plugging one
+            f"a setting is out of what the {kind} takes: check the profile's devices.{kind}, "
+            "camera_settings and sim sections (run with --debug and report it if they are right)"
+            if isinstance(exc, VALUE_ERRORS)
+            else "check the device's cable/power and the profile's transport"
+        )
         raise RigError(
-            f"{kind} ({driver}) failed to {action}: {type(exc).__name__}: {exc}",
-            "check the device's cable/power and the profile's transport",
+            f"{kind} ({driver}) failed to {action}: {type(exc).__name__}: {exc}", fix
         ) from exc
 
 

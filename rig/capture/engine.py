@@ -23,11 +23,13 @@ from rich.progress import (
     TimeElapsedColumn,
     TimeRemainingColumn,
 )
+from rich.text import Text
 
 from core import interrupts
 from core.errors import RigError
 from core.manifest import FrameRecord
 from core.session import RAW_DIR
+from core.text import printable
 from drivers.protocols import LightSource
 from rig.capture.board_check import look_for_board
 from rig.capture.coverage import coverage_hint
@@ -81,8 +83,8 @@ class StopRequest:
             raise KeyboardInterrupt
         self.requested = True
         self._console.print(
-            "[yellow]stopping after the frame in flight "
-            "(Ctrl-C again to discard it and stop now)[/]"
+            "stopping after the frame in flight (Ctrl-C again to discard it and stop now)",
+            style="yellow",
         )
 
     @contextmanager
@@ -108,6 +110,12 @@ def view_directions(devices: RigDevices, profile: Profile) -> list[tuple[float, 
         if len(directions) >= n:
             return directions[:n]
     return [profile.plan.trajectory.view_direction(v, n) for v in range(n)]
+
+
+def view_of(view: int, n_views: int) -> str:
+    """A view as every message names it: its number from 0 (as in the manifest, file names and
+    `rig relight --view`), with how far along the plan it is."""
+    return f"view {view} ({view + 1}/{n_views})"
 
 
 def _lit(levels: Mapping[str, float]) -> dict[str, float]:
@@ -186,8 +194,8 @@ class RunEngine:
                 progress.update(
                     task,
                     advance=1,
-                    description=f"view {msg.spec.view + 1}/"
-                    f"{self.profile.plan.views} {msg.spec.label}",
+                    description=f"{view_of(msg.spec.view, self.profile.plan.views)} "
+                    f"{msg.spec.label}",
                 )
 
     def _stopped(self, note: str = "") -> CaptureStopped:
@@ -250,13 +258,13 @@ class RunEngine:
                 else "Move the plate"
             )
             answer = self._prompt(
-                f"{what} to view {msg.view + 1}/{msg.n_views}{light} "
+                f"{what} to {view_of(msg.view, msg.n_views)}{light} "
                 f"({hint}) and press Enter (q + Enter to stop) "
             )
             if answer.strip().lower() in ("q", "quit", "stop"):
                 raise self._stopped()
         else:
-            self.console.print(f"view {msg.view + 1}/{msg.n_views}: {hint}", highlight=False)
+            self.console.print(f"{view_of(msg.view, msg.n_views)}: {hint}", highlight=False)
         self.devices.goto_view(msg.view)
         if msg.view not in self.state.views_done:
             self.state.views_done.append(msg.view)
@@ -307,7 +315,7 @@ class RunEngine:
         """Capture and store one frame; a file that fails verification (a torn download) is
         discarded and the frame shot again, up to CAPTURE_ATTEMPTS times."""
         incoming = self.session_dir / RAW_DIR / INCOMING
-        where = f"frame {spec.frame} (view {spec.view + 1}, {spec.label})"
+        where = f"frame {spec.frame} (view {spec.view}, {spec.label})"
         for attempt in range(1, CAPTURE_ATTEMPTS + 1):
             stem = f"f{spec.frame:05d}" + (f"_{attempt}" if attempt > 1 else "")
             with device_errors("camera", self.devices.names["camera"], f"capture {where}"):
@@ -321,7 +329,7 @@ class RunEngine:
                 if attempt == CAPTURE_ATTEMPTS:
                     raise RigError(f"{where}: {exc.problem}", exc.fix) from exc
                 self.console.print(
-                    f"[yellow]{where}: {exc.problem} — capturing it again[/]", highlight=False
+                    Text(printable(f"{where}: {exc.problem} — capturing it again"), "yellow")
                 )
         self.state.done.add(spec.frame)
         self.state.captured += 1
@@ -353,9 +361,9 @@ class RunEngine:
             else "lengthen the exposure or add light"
         )
         self.console.print(
-            f"[yellow]exposure:[/] {label}: the board's paper/ink contrast is only "
+            f"exposure: {label}: the board's paper/ink contrast is only "
             f"{board['contrast']:.2f} (want {BOARD_MIN_CONTRAST}) — {fix}",
-            highlight=False,
+            style="yellow",
         )
 
     def _board_report(self, record: FrameRecord, raw: RawData) -> dict[str, Any]:
@@ -376,17 +384,17 @@ class RunEngine:
         self.state.board_checks[spec.view] = report
         if report["corners"] < BOARD_MIN_CORNERS:
             self.console.print(
-                f"[yellow]board:[/] view {spec.view + 1}: only {report['corners']} board corners "
+                f"board: view {spec.view}: only {report['corners']} board corners "
                 f"found (need {BOARD_MIN_CORNERS}) — keep more of the board in the frame, "
                 "away from the object's shadow and glare",
-                highlight=False,
+                style="yellow",
             )
         return report
 
     def _check_exposure(self, record: FrameRecord, raw: RawData, spec: FrameSpec) -> ExposureCheck:
         check = check_exposure(raw, spec.label, record.exposure_s)
         if check.suggestion:
-            self.console.print(f"[yellow]exposure:[/] {check.suggestion}", highlight=False)
+            self.console.print(f"exposure: {check.suggestion}", style="yellow")
         return check
 
     def _switch_off(self) -> None:

@@ -14,6 +14,8 @@ from rig.outpaths import output_file
 if TYPE_CHECKING:
     from rig.batch.task import Outcome
 
+MAX_WORKERS = 1024  # more processes than any one machine's cores and memory take
+
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -85,15 +87,15 @@ def _run_batch() -> Callable[..., list[Outcome]]:
 
 def handle(args: argparse.Namespace) -> int:
     run_batch = _run_batch()
-    from rich.console import Console
-
     from reconstruct.run.pipeline import load_config
     from rig.batch.sessions import collect
     from rig.batch.summary import table, write_csv
+    from rig.console import console as plain_console
     from rig.warmup import compile_kernels_once
 
-    if args.workers is not None and args.workers < 1:
-        raise RigError(f"--workers {args.workers} is not a positive number", "give 1 or more")
+    if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
+        raise RigError(f"--workers {args.workers} is out of range",
+                       f"allowed: a whole number in [1, {MAX_WORKERS}]")
     if args.workers is not None and args.scheduler is not None:
         raise RigError(
             "--workers sizes a local cluster, but --scheduler names an existing one",
@@ -103,12 +105,12 @@ def handle(args: argparse.Namespace) -> int:
         output_file(args.summary, "--summary")
     sessions = collect(args.sessions, args.list_file)
     config = load_config(args.config)
-    console = Console(stderr=True)
+    console = plain_console(stderr=True)
     compile_kernels_once(console)  # once, not in every worker
     outcomes = run_batch(
         sessions, config, args.force, args.workers, args.scheduler, args.verbose, console
     )
-    Console().print(table(outcomes))
+    plain_console().print(table(outcomes))
     if args.summary is not None:
         console.print(f"summary: {write_csv(args.summary, outcomes)}", highlight=False)
     failed = [o for o in outcomes if o.status == "failed"]

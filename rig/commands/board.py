@@ -94,11 +94,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from reconstruct.poses.board import BoardSpec, write_sheet
+    from rig.console import console as plain_console
 
-    console = Console(soft_wrap=True)
+    console = plain_console(soft_wrap=True)
     measured = None if args.measured_square_mm is None else args.measured_square_mm / 1000
     if args.snippet is not None:
         output_file(args.snippet, "--snippet")

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 from core.errors import RigError
 from rig import wizard
+from rig.cliargs import number
 from rig.commands import calibrate_camera
 from rig.outpaths import output_dir, output_file
 
@@ -42,12 +43,25 @@ def _store(args: argparse.Namespace, *, must_exist: bool = True) -> CalibrationS
 
     root = _store_root(args)
     if must_exist and not (root / "index.yaml").exists():
+        where = f"`rig calibrate init-store {root}`" if _can_hold_a_store(root) else (
+            "`rig calibrate init-store NEW_FOLDER`"
+        )
         raise RigError(
             f"no calibration store at {root}",
-            f"create one with `rig calibrate init-store {root}` (or pass --store DIR / set "
-            f"${ENV_STORE})",
+            f"create one with {where} (or pass --store DIR / set ${ENV_STORE})",
         )
     return CalibrationStore(root)
+
+
+def _can_hold_a_store(root: Path) -> bool:
+    """Whether ``init-store`` could make ``root`` a store: a new folder, or an empty one, that
+    this user may write (the nearest existing folder on the way)."""
+    if root.is_dir():
+        return not any(root.iterdir()) and os.access(root, os.W_OK | os.X_OK)
+    if root.exists():
+        return False
+    parent = next((p for p in root.parents if p.exists()), None)
+    return parent is not None and parent.is_dir() and os.access(parent, os.W_OK | os.X_OK)
 
 
 def _slug(text: str) -> str:
@@ -56,10 +70,11 @@ def _slug(text: str) -> str:
 
 # -- list / show / remove / init-store ----------------------------------------------------------
 def cmd_list(args: argparse.Namespace) -> int:
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console()
+    from rig.console import console as plain_console
+
+    console = plain_console()
     store = _store(args)
     table = Table(title=f"calibration store {store.root}")
     for col in ("name", "kind", "version", "added", "source / device"):
@@ -74,24 +89,23 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 def cmd_show(args: argparse.Namespace) -> int:
     import numpy as np
-    from rich.console import Console
 
     from calibration.plots import plot_spectrum
+    from rig.console import console as plain_console
 
-    console = Console()
+    console = plain_console()
     store = _store(args)
     entry = store.entry(args.name, args.version)
     if entry.kind == "flat_field":
         _, flat = store.flat_field(entry.name, entry.version)
-        console.print(f"[bold]{entry.name}[/] v{entry.version} (flat field, {flat.method})")
+        console.print(f"{entry.name} v{entry.version} (flat field, {flat.method})", style="bold")
         corner = {f"corner gain {c}": g for c, g in flat.to_dict()["corner_gain"].items()}
         for key, value in {**entry.provenance, **corner}.items():
             console.print(f"  {key}: {value}")
         return 0
     w, v = store.read_native(entry)
-    console.print(
-        f"[bold]{entry.name}[/] v{entry.version} ({entry.kind}) — {store.root / entry.file}"
-    )
+    console.print(f"{entry.name} v{entry.version} ({entry.kind}) — {store.root / entry.file}",
+                  style="bold")
     console.print(
         f"  added {entry.added}, {w.size} samples {w[0]:g}–{w[-1]:g} nm, "
         f"sha256 {entry.sha256[:12]}…"
@@ -108,9 +122,9 @@ def cmd_show(args: argparse.Namespace) -> int:
 
 
 def cmd_remove(args: argparse.Namespace) -> int:
-    from rich.console import Console
+    from rig.console import console as plain_console
 
-    console = Console()
+    console = plain_console()
     store = _store(args)
     versions = [e for e in store.entries() if e.name == args.name]
     if args.version is None and len(versions) > 1 and not args.all:
@@ -124,31 +138,30 @@ def cmd_remove(args: argparse.Namespace) -> int:
 
 
 def cmd_init_store(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from calibration.store import CalibrationStore
+    from rig.console import console as plain_console
 
-    console = Console()
+    console = plain_console()
     root = output_dir(Path(args.dir), "DIR") if args.dir else _store_root(args)
     store = CalibrationStore.create_default(root)
     console.print(f"wrote default calibration store to {store.root}:")
     for e in store.entries():
         console.print(f"  {e.kind:6} {e.name}")
     console.print(
-        "[yellow]bulb channel SPDs are models: measure your light and `rig calibrate import` it[/]"
+        "bulb channel SPDs are models: measure your light and `rig calibrate import` it",
+        style="yellow",
     )
     return 0
 
 
 # -- import -------------------------------------------------------------------------------------
 def cmd_import(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from calibration.grid import DEFAULT_GRID
     from calibration.importers import read_spectrum
     from calibration.spectra import resample
+    from rig.console import console as plain_console
 
-    console = Console()
+    console = plain_console()
     store = _store(args, must_exist=False)
     spectrum = read_spectrum(args.file, args.format)
     values = spectrum.column(args.column, args.kind)
@@ -174,7 +187,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     try:
         resample(spectrum.wavelengths_nm, values, DEFAULT_GRID, source=str(args.file))
     except RigError as error:
-        grid_note = f" [yellow](warning: {error})[/]"
+        grid_note = f" (warning: {error})"
     console.print(
         f"added {entry.kind} {entry.name!r} version {entry.version} from {spectrum.format} "
         f"({spectrum.wavelengths_nm.size} samples {spectrum.wavelengths_nm[0]:g}–"
@@ -186,7 +199,6 @@ def cmd_import(args: argparse.Namespace) -> int:
 # -- basis --------------------------------------------------------------------------------------
 def cmd_basis(args: argparse.Namespace) -> int:
     import numpy as np
-    from rich.console import Console
     from rich.table import Table
 
     from calibration.basis import default_basis, pca_basis
@@ -194,8 +206,9 @@ def cmd_basis(args: argparse.Namespace) -> int:
     from calibration.importers import read_reflectance_set
     from calibration.plots import plot_basis
     from calibration.spectra import resample
+    from rig.console import console as plain_console
 
-    console = Console()
+    console = plain_console()
     output_file(Path(args.plot), "--plot")
     if args.out:
         output_file(Path(args.out), "--out")
@@ -279,7 +292,6 @@ def _candidates(args: argparse.Namespace, store: CalibrationStore | None) -> dic
 
 
 def cmd_select(args: argparse.Namespace) -> int:
-    from rich.console import Console
     from rich.table import Table
 
     from calibration import defaults
@@ -290,8 +302,9 @@ def cmd_select(args: argparse.Namespace) -> int:
     from calibration.selection import rank_illumination_sets
     from calibration.spectra import resample
     from calibration.store import CalibrationStore
+    from rig.console import console as plain_console
 
-    console = Console()
+    console = plain_console()
     output_file(Path(args.plot), "--plot")
 
     if args.top < 1:
@@ -299,7 +312,7 @@ def cmd_select(args: argparse.Namespace) -> int:
     root = _store_root(args)
     store = CalibrationStore(root) if (root / "index.yaml").exists() else None
     if store is None:
-        console.print(f"[dim]no calibration store at {root}: using the built-in models[/]")
+        console.print(f"no calibration store at {root}: using the built-in models", style="dim")
     if store is not None and args.camera in store.names("camera"):
         camera = store.camera(args.camera, DEFAULT_GRID)
     else:
@@ -356,9 +369,9 @@ def cmd_camera(args: argparse.Namespace) -> int:
 
 # -- flat-field ---------------------------------------------------------------------------------
 def cmd_flat_field(args: argparse.Namespace) -> int:
-    from rich.console import Console
+    from rig.console import console as plain_console
 
-    console = Console()
+    console = plain_console()
     if args.lensfun:
         flat, provenance, name = _lensfun_flat_field(args)
     else:
@@ -487,7 +500,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--serial")
     p.add_argument("--date", help="measurement date")
     p.add_argument("--instrument", help="spectrometer used")
-    p.add_argument("--integration-time-ms", dest="integration_time_ms", type=float)
+    p.add_argument("--integration-time-ms", dest="integration_time_ms",
+                   type=number(float, above=0, max=3_600_000))
     p.add_argument("--operator")
     p.add_argument("--notes")
     p.set_defaults(func=cmd_import)
@@ -500,7 +514,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("basis", parents=[common], help="build the reflectance basis (PCA)")
     p.add_argument("--from", dest="from_file", metavar="FILE.csv", help="reflectance set")
-    p.add_argument("--components", type=int, default=8)
+    p.add_argument("--components", type=number(int, min=1, max=1000), default=8)
     p.add_argument("--out", metavar="NPZ", help="write the basis (.npz)")
     p.add_argument("--plot", metavar="PNG", default="basis.png")
     p.set_defaults(func=cmd_basis)
@@ -510,9 +524,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     group = p.add_mutually_exclusive_group()
     group.add_argument("--lights", help="comma-separated light entries to choose from")
     group.add_argument("--mixtures", action="store_true", help="all on/off mixes of bulb channels")
-    p.add_argument("--max-size", type=int, default=3)
-    p.add_argument("--noise", type=float, default=0.003, help="noise std, fraction of white")
-    p.add_argument("--smoothness", type=float, help="fixed smoothness (default: best per set)")
+    p.add_argument("--max-size", type=number(int, min=1, max=16), default=3)
+    p.add_argument("--noise", type=number(float, min=0, max=1), default=0.003,
+                   help="noise std, fraction of white")
+    p.add_argument("--smoothness", type=number(float, min=0, max=1e6),
+                   help="fixed smoothness (default: best per set)")
     p.add_argument("--reflectances", metavar="FILE.csv", help="reference set (default CC24)")
     p.add_argument("--basis", metavar="NPZ", help="basis from `rig calibrate basis --out`")
     p.add_argument("--top", type=int, default=15, help="rows to print and plot")
@@ -540,16 +556,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--name", help="entry name (default flat/CAMERA, or flat/LENS ...)")
     p.add_argument("--dark", action="append", default=[], metavar="RAW",
                    help="a frame with the light off, subtracted (repeatable)")
-    p.add_argument("--card-distance-m", type=float, help="camera to card along the axis, m")
-    p.add_argument("--focal-px", type=float, help="the camera's focal length in pixels")
+    p.add_argument("--card-distance-m", type=number(float, above=0, max=100),
+                   help="camera to card along the axis, m")
+    p.add_argument("--focal-px", type=number(float, above=0, max=1e6),
+                   help="the camera's focal length in pixels")
     p.add_argument("--light-offset-m", default="0,0,0", metavar="X,Y,Z",
                    help="the light in the camera frame, m (default 0,0,0)")
     p.add_argument("--diffuser", action="store_true",
                    help="an opal diffuser over the lens (evenly lit: no card geometry)")
     p.add_argument("--lensfun", metavar='"MAKER MODEL"', help="camera in lensfun's database")
     p.add_argument("--lens", help="lens model in lensfun's database")
-    p.add_argument("--focal", type=float, metavar="MM", help="focal length, mm")
-    p.add_argument("--aperture", type=float, metavar="F", help="f-number")
+    p.add_argument("--focal", type=number(float, above=0, max=10_000), metavar="MM",
+                   help="focal length, mm")
+    p.add_argument("--aperture", type=number(float, min=0.5, max=256), metavar="F",
+                   help="f-number")
     p.add_argument("--size", default="6000x4000", metavar="WxH",
                    help="the camera's image size (default 6000x4000: its aspect ratio matters)")
     p.set_defaults(func=cmd_flat_field)

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from core.errors import RigError
+from rig.cliargs import number
 from rig.outpaths import output_file
 
 if TYPE_CHECKING:
@@ -87,10 +88,11 @@ def _provenance(
 
 
 def _print_fit(fit: CameraFit, names: list[str], sources: list[str]) -> None:
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console()
+    from rig.console import console as plain_console
+
+    console = plain_console()
     table = Table(
         title="chart fit: residual per patch (% of the photo's brightest patch, RGB angle)"
     )
@@ -122,12 +124,12 @@ def _print_fit(fit: CameraFit, names: list[str], sources: list[str]) -> None:
 def run(args: argparse.Namespace, store: CalibrationStore) -> int:
     """The command on an opened store (`rig calibrate` opens it the way its other actions do)."""
     import numpy as np
-    from rich.console import Console
 
     from calibration import defaults
     from calibration.camera_fit import build_prior, fit_camera, read_patch_csv
     from calibration.camera_fit_plot import plot_camera_fit
     from calibration.grid import DEFAULT_GRID
+    from rig.console import console as plain_console
 
     sources: list[str] = args.from_chart or args.patches
     plot = output_file(
@@ -145,7 +147,7 @@ def run(args: argparse.Namespace, store: CalibrationStore) -> int:
         args.name, DEFAULT_GRID.wavelengths, fit.sensitivity, _provenance(args, store, lamps, fit)
     )
     plot_camera_fit(fit, DEFAULT_GRID.wavelengths, f"{args.name} v{entry.version}", plot)
-    console = Console()
+    console = plain_console()
     console.print(f"added camera {entry.name!r} version {entry.version} to {store.root}")
     console.print(f"plot written to {plot}")
     return 0
@@ -187,13 +189,13 @@ def add_parser(
     p.add_argument("--prior", metavar="FILE|DIR", help=PRIOR_HELP)
     p.add_argument(
         "--components",
-        type=int,
+        type=number(int, min=1, max=1000),
         default=DEFAULT_COMPONENTS,
         help="principal components per channel in the prior",
     )
     p.add_argument(
         "--white-level",
-        type=float,
+        type=number(float, above=0, max=1e9),
         metavar="V",
         help="patch values at or above V are saturated (refused)",
     )

@@ -8,7 +8,9 @@ from pathlib import Path
 
 from core import interrupts
 from core.errors import RigError
+from core.text import printable
 from profiles import shipped_profiles
+from rig.cliargs import SEED_MAX, number
 from rig.outpaths import output_dir
 
 
@@ -34,7 +36,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--yes", "-y", action="store_true", help="no prompts (simulated rigs, automation)"
     )
     parser.add_argument("--note", default="", help="free text for session.yaml (object, operator)")
-    parser.add_argument("--seed", type=int, default=None, help="simulated scene seed (default 0)")
+    parser.add_argument("--seed", type=number(int, min=0, max=SEED_MAX), default=None,
+                        help="simulated scene seed (default 0)")
     parser.add_argument(
         "--reconstruct",
         action="store_true",
@@ -63,11 +66,10 @@ def stop_hint(args: argparse.Namespace) -> str:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from rig.capture import CaptureStopped, run_capture
+    from rig.console import console as plain_console
 
-    console = Console(stderr=True)
+    console = plain_console(stderr=True)
     session = args.resume if args.resume is not None else args.out
     output_dir(session, "--resume" if args.resume is not None else "--out")
     profile = args.profile if args.profile is not None or args.resume else "sim"
@@ -84,9 +86,9 @@ def handle(args: argparse.Namespace) -> int:
         )
     except CaptureStopped as stopped:
         if interrupts.received() is None:  # 'q' or Ctrl-C at a prompt; a signal gets its line
-            console.print(f"[yellow]{stopped}[/]", highlight=False)
+            console.print(str(stopped), style="yellow")
         return 130
-    print(out)
+    print(printable(out))
     if args.reconstruct:
         return reconstruct(out)
     return 0
@@ -105,5 +107,5 @@ def reconstruct(session: Path) -> int:
         ) from exc
     compile_kernels_once()
     pipeline.run_reconstruction(session)
-    print(session / "recon")
+    print(printable(session / "recon"))
     return 0

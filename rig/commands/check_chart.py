@@ -8,6 +8,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from rig.cliargs import MAX_VIEWS, number
 from rig.outpaths import output_dir
 
 if TYPE_CHECKING:
@@ -32,7 +33,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("session", type=Path, help="session directory")
     parser.add_argument(
-        "--view", type=int, action="append", default=None, metavar="N",
+        "--view", type=number(int, min=0, max=MAX_VIEWS - 1), action="append", default=None,
+        metavar="N",
         help="look only in view N (repeatable); default every view",
     )  # fmt: skip
     parser.add_argument(
@@ -72,8 +74,6 @@ def table(check: ChartCheck) -> Table:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from calibration.colour_difference import DEFAULT_ILLUMINANTS, illuminant
     from calibration.store import CalibrationStore
     from core.lock import locked
@@ -83,6 +83,7 @@ def handle(args: argparse.Namespace) -> int:
     from reconstruct.chart.reference import default_reference, read_reference
     from reconstruct.chart.report import write
     from reconstruct.run.pipeline import load_config
+    from rig.console import console as plain_console
 
     session = Session.open(args.session)
     out = output_dir(args.out or session.recon_dir / OUT_DIR, "--out")
@@ -101,7 +102,7 @@ def handle(args: argparse.Namespace) -> int:
             decode_config=decode_config, illuminants=lights,
         )  # fmt: skip
         files = write(check, chart, out)
-    console = Console()
+    console = plain_console()
     console.print(table(check))
     summary = check.summary()
     means = ", ".join(

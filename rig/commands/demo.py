@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from core.errors import RigError
+from rig.cliargs import MAX_VIEWS, SEED_MAX, number
 from rig.outpaths import output_dir
 
 
@@ -23,7 +24,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", type=Path, default=Path("rig-demo"), help="output folder")
     parser.add_argument("--views", type=int, default=20, help="camera positions (default 20)")
-    parser.add_argument("--seed", type=int, default=0, help="scene and noise seed")
+    parser.add_argument("--seed", type=number(int, min=0, max=SEED_MAX), default=0,
+                        help="scene and noise seed")
     parser.set_defaults(func=handle)
 
 
@@ -32,7 +34,6 @@ def handle(args: argparse.Namespace) -> int:
 
     import numpy as np
     import yaml
-    from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
     from rich.table import Table
 
@@ -42,19 +43,21 @@ def handle(args: argparse.Namespace) -> int:
     from reconstruct.run.logfile import run_logged
     from reconstruct.run.pipeline import session_responses
     from rig.capture import run_capture
+    from rig.console import console as plain_console
     from rig.demo_profile import demo_profile
     from rig.next_steps import next_commands
     from rig.progress_lines import ProgressLines
     from rig.warmup import compile_kernels_once
 
-    if args.views < 6:
-        raise RigError(f"--views {args.views} is too few", "use at least 6 views (default 20)")
+    if not 6 <= args.views <= MAX_VIEWS:
+        raise RigError(f"--views {args.views} is out of range",
+                       f"allowed: a whole number in [6, {MAX_VIEWS}] (default 20)")
     out = output_dir(Path(args.out), "--out").resolve()
     session = out / "session"
     if session.exists():
         raise RigError(f"{session} already exists", "choose another --out or remove the folder")
     out.mkdir(parents=True, exist_ok=True)
-    console = Console(stderr=True)
+    console = plain_console(stderr=True)
     profile_path = out / "demo-profile.yaml"
     profile_path.write_text(yaml.safe_dump(demo_profile(args.views), sort_keys=False))
     config = {
@@ -88,7 +91,7 @@ def handle(args: argparse.Namespace) -> int:
         t = time.perf_counter()
         with open(out / "capture.txt", "w", encoding="utf-8") as capture_log:
             # the per-view prompts are for a person holding the camera: shown with -v only
-            prompts = console if args.verbose else Console(file=capture_log, width=100)
+            prompts = console if args.verbose else plain_console(file=capture_log, width=100)
             run_capture(profile_path, session, yes=True, seed=args.seed, console=prompts)
         timings["capture"] = time.perf_counter() - t
         step("demo: reconstruction", 1)
@@ -133,18 +136,18 @@ def handle(args: argparse.Namespace) -> int:
     table.add_row(
         "accuracy of the initial mesh (MVS, before optimisation)", f"{initial * 1e3:.3f} mm"
     )
-    out_console = Console()
+    out_console = plain_console()
     out_console.print(table)
     out_console.print(f"session:        {session}")
     out_console.print(f"reconstruction: {rec.recon_dir} (mesh.ply, reflectance.npz, report.json)")
     out_console.print(f"plots:          {', '.join(p.name for p in rec.plots)}")
     out_console.print(f"evaluation:     {', '.join(Path(f).name for f in ev.files)}")
     posed = sorted(read_colmap_text(rec.recon_dir / "poses")[1])
-    out_console.print(f"output folder:  {out}\nnext:", soft_wrap=True)
+    out_console.print(f"output folder:  {out}", soft_wrap=True)
+    out_console.print("next:")
     for command, what in next_commands(out, posed[0] - 1 if posed else 0):
         # one line each, never wrapped: a log keeps commands that can be pasted
-        out_console.print(f"  {command:<60}  {what}", highlight=False, markup=False,
-                          soft_wrap=True)
+        out_console.print(f"  {command:<60}  {what}", soft_wrap=True)
     return 0
 
 

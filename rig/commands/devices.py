@@ -156,23 +156,23 @@ def discover(probes: tuple[Probe, ...] = PROBES) -> tuple[list[Found], list[str]
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
-    from rich.markup import escape
     from rich.table import Table
 
+    from rig.console import console as plain_console
+
     rows, notes = discover()
-    console = Console()
+    console = plain_console()
     if rows:
         table = Table(title="Connected devices")
         for column in ("kind", "address", "device", "driver"):
             table.add_column(column)
         for row in rows:
-            table.add_row(*(escape(v) for v in (row.kind, row.address, row.device, row.driver)))
+            table.add_row(row.kind, row.address, row.device, row.driver)
         console.print(table)
     else:
         console.print("none found")
     for note in notes:
-        console.print(f"note: {note}", highlight=False, markup=False)
+        console.print(f"note: {note}")
     return 0
 
 

@@ -80,11 +80,10 @@ def lights(names: list[str], recon: Path) -> list[Illuminant]:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from core.session import RECON_DIR
     from reconstruct.outputs import export
     from reconstruct.outputs.evaluate import evaluate
+    from rig.console import console as plain_console
 
     recon = Path(args.recon)
     if recon.is_dir() and not (recon / export.REFLECTANCE_FILE).is_file():
@@ -99,7 +98,7 @@ def handle(args: argparse.Namespace) -> int:
         recon, args.gt_mesh, args.gt_reflectance, offset,
         illuminants=lights(args.illuminant, recon_dir),
     )  # fmt: skip
-    console = Console()
+    console = plain_console()
     console.print(table(ev))
     per_patch = patches(ev)
     if per_patch is not None:

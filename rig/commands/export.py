@@ -24,13 +24,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from calibration.grid import SpectralGrid
     from core.errors import RigError
     from reconstruct.outputs.gltf import write_glb
     from reconstruct.outputs.relight import illuminant_spd
     from reconstruct.outputs.result import load_result
+    from rig.console import console as plain_console
 
     glb = Path(args.glb)
     if glb.is_dir() or glb.suffix.lower() != ".glb":
@@ -39,7 +38,7 @@ def handle(args: argparse.Namespace) -> int:
     spd = illuminant_spd(args.illuminant, SpectralGrid.from_wavelengths(result.wavelengths_nm))
     glb.parent.mkdir(parents=True, exist_ok=True)
     write_glb(glb, result, spd, args.illuminant)
-    Console(stderr=True).print(
+    plain_console(stderr=True).print(
         f"wrote {glb} ({glb.stat().st_size / 1e6:.1f} MB, {len(result.mesh.vertices)} vertices, "
         f"colours under {args.illuminant})", highlight=False
     )

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from core.errors import RigError
+from core.text import printable
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -81,28 +82,28 @@ def handle(args: argparse.Namespace) -> int:
     if args.status:
         from reconstruct.run.status import describe, read_status
 
-        print(describe(read_status(Path(args.session) / RECON_DIR)))
+        print(printable(describe(read_status(Path(args.session) / RECON_DIR))))
         return 0
     if args.initial_mesh is not None and not args.initial_mesh.is_file():
         raise RigError(
             f"--initial-mesh {args.initial_mesh} is not a file", "give a PLY, OBJ, STL, OFF or GLB"
         )
     # the pipeline (pycolmap, numba, OpenCV) is imported for a run only
-    from rich.console import Console
     from rich.text import Text
 
     from reconstruct.frames.decode import list_unusable
     from reconstruct.run.logfile import run_logged
     from reconstruct.run.pipeline import load_config
+    from rig.console import console as plain_console
     from rig.warmup import compile_kernels_once
 
-    console = Console(stderr=True)
+    console = plain_console(stderr=True)
     config = load_config(args.config)
     session = Session.open(args.session)  # a wrong path fails now, not after the warm-up
     compile_kernels_once(console)
     rec = run_logged(session, config, args.initial_mesh, args.verbose, console)
     summary(console, rec)
-    print(rec.recon_dir)
+    print(printable(rec.recon_dir))
     skipped = rec.report["skipped_frames"]
     if skipped:
         console.print(

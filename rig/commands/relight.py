@@ -9,6 +9,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from core.errors import RigError
+from core.text import printable
+from rig.cliargs import MAX_VIEWS, number
 from rig.outpaths import output_file
 
 if TYPE_CHECKING:
@@ -26,7 +28,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "session", type=Path, help="session directory with recon/ (or `rig demo`'s folder)"
     )
     which = parser.add_mutually_exclusive_group(required=True)
-    which.add_argument("--view", type=int, help="render from captured view N")
+    which.add_argument("--view", type=number(int, min=0, max=MAX_VIEWS - 1),
+                       help="render from captured view N (from 0)")
     which.add_argument(
         "--camera",
         type=Path,
@@ -41,11 +44,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--illuminant", default="D65", help="CIE name (D65, A, F2, …) or a CSV wavelength_nm,power"
     )
-    parser.add_argument("--exposure", type=float, default=0.8, help="white at the scene reads this")
+    parser.add_argument("--exposure", type=number(float, above=0, max=1000), default=0.8,
+                        help="white at the scene reads this")
     parser.add_argument(
         "--out", type=Path, default=None, help="PNG path (default in recon/relight/)"
     )
     parser.set_defaults(func=handle)
+
+
+MAX_COORDINATE_M = 1000.0  # a light farther than a kilometre lights a scene of centimetres as 0
 
 
 def parse_xyz(text: str, what: str) -> np.ndarray:
@@ -61,6 +68,9 @@ def parse_xyz(text: str, what: str) -> np.ndarray:
         raise RigError(f"{what} {text!r} has {v.size} numbers", "give three numbers: x,y,z")
     if not np.all(np.isfinite(v)):
         raise RigError(f"{what} {text!r} is not finite", "give three finite numbers in metres")
+    if np.any(np.abs(v) > MAX_COORDINATE_M):
+        raise RigError(f"{what} {text!r} is too far", f"allowed: each coordinate in "
+                       f"[-{MAX_COORDINATE_M:g}, {MAX_COORDINATE_M:g}] m")
     return v
 
 
@@ -81,8 +91,6 @@ def handle(args: argparse.Namespace) -> int:
 
     if args.out is not None:
         output_file(args.out, "--out")
-    if not (np.isfinite(args.exposure) and args.exposure > 0):
-        raise RigError(f"--exposure {args.exposure} is not positive", "give e.g. 0.8")
     position = None if args.light_pos is None else parse_xyz(args.light_pos, "--light-pos")
     file_camera = None if args.camera is None else load_camera_file(args.camera)
     from core.session import find_session
@@ -128,5 +136,5 @@ def handle(args: argparse.Namespace) -> int:
     )
     out = args.out or recon / "relight" / f"{name}_{illum}.png"
     write_png(Path(out), encode_srgb(image))
-    print(out)
+    print(printable(out))
     return 0

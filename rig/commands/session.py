@@ -28,14 +28,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def handle_verify(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from core.manifest import verify_frames
     from core.manifest_check import session_problems
     from core.session import Session
+    from rig.console import console as plain_console
 
     session = Session.open(args.session, bound_views=False)
-    console = Console(soft_wrap=True)
+    console = plain_console(soft_wrap=True)
     problems = verify_frames(session.root, session.frames)
     problems += companion_problems(session)
     counts = Counter(r.frame for r in session.frames)
@@ -44,7 +43,7 @@ def handle_verify(args: argparse.Namespace) -> int:
     for problem in problems:
         console.print(
             f"{problem.problem:<14} frame {problem.record.frame} (view "
-            f"{problem.record.view + 1}, {problem.record.illumination}): "
+            f"{problem.record.view}, {problem.record.illumination}): "
             f"{problem.record.path}",
             highlight=False,
         )
@@ -65,9 +64,8 @@ def handle_verify(args: argparse.Namespace) -> int:
             f"; {missing_planned} planned frames not captured yet "
             f"(`rig capture --resume {session.root}`)"
         )
-    console.print(
-        ("[green]ok:[/] " if ok else "[bold red]problems:[/] ") + summary, highlight=False
-    )
+    console.print(("ok: " if ok else "problems: ") + summary,
+                  style="green" if ok else "bold red")
     return 0 if ok else 1
 
 
@@ -126,12 +124,11 @@ def companion_problems(session: Session) -> list[FrameProblem]:
 
 
 def handle_info(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from core.session import Session
+    from rig.console import console as plain_console
 
     session = Session.open(args.session)
-    console = Console(soft_wrap=True)
+    console = plain_console(soft_wrap=True)
     for line in summarise(session):
         console.print(line, highlight=False)
     return 0

@@ -32,15 +32,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from calibration.grid import SpectralGrid
+    from rig.console import console as plain_console
     from rig.view.colour import illuminant_matrices
     from rig.view.data import load_view_data
     from rig.view.page import build_page, export_page
     from rig.view.serve import serve
 
-    console = Console(stderr=True)
+    console = plain_console(stderr=True)
     if args.export is not None and args.export.is_dir():
         raise RigError(f"--export {args.export} is a folder", "give a file name ending in .html")
     if not 0 <= args.port <= 65535:

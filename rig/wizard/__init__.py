@@ -21,6 +21,7 @@ import argparse
 from pathlib import Path
 
 from core.errors import RigError
+from rig.cliargs import SEED_MAX, number
 
 # calibration.defaults.camera_names() (it loads colour-science), repeated so that the `rig`
 # parser stays light; a test keeps them equal.
@@ -42,7 +43,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "$SPECTRAL_RIG_STORE or ~/.local/share/spectral-rig/calibration)",
     )
     parser.add_argument("--yes", "-y", action="store_true", help="no prompts; use the flags")
-    parser.add_argument("--seed", type=int, default=0, help="simulated rig seed")
+    parser.add_argument("--seed", type=number(int, min=0, max=SEED_MAX), default=0,
+                        help="simulated rig seed")
     parser.add_argument(
         "--import",
         dest="imports",
@@ -60,7 +62,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--camera-file", metavar="CSV", help="measured sensitivity wavelength_nm,R,G,B"
     )
     parser.add_argument(
-        "--reference-distance-m", type=float, help="light to white reference, metres"
+        "--reference-distance-m", type=number(float, above=0, max=100),
+        help="light to white reference, metres"
     )
     parser.add_argument(
         "--reference-reflectance",
@@ -79,17 +82,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="store relative SPDs (the reconstruction then has no absolute scale)",
     )
-    parser.add_argument("--noise", type=float, default=0.01, help="selection noise (fraction)")
+    parser.add_argument("--noise", type=number(float, min=0, max=1), default=0.01,
+                        help="selection noise (fraction)")
     flat = parser.add_argument_group(
         "flat field (when the profile names calibration.flat_field)"
     )
     flat.add_argument("--skip-flat-field", action="store_true", help="leave the flat field out")
     flat.add_argument(
-        "--flat-field-positions", type=int, default=4, metavar="N",
+        "--flat-field-positions", type=number(int, min=1, max=100), default=4, metavar="N",
         help="white card positions to average (default 4)",
     )
-    flat.add_argument("--card-distance-m", type=float, help="camera to white card, metres")
-    flat.add_argument("--focal-px", type=float, help="the camera's focal length in pixels")
+    flat.add_argument("--card-distance-m", type=number(float, above=0, max=100),
+                      help="camera to white card, metres")
+    flat.add_argument("--focal-px", type=number(float, above=0, max=1e6),
+                      help="the camera's focal length in pixels")
     flat.add_argument(
         "--flat-field-diffuser", action="store_true",
         help="an opal diffuser over the lens instead of a card (evenly lit: no geometry)",
@@ -100,13 +106,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from calibration import defaults
     from calibration.grid import DEFAULT_GRID
     from calibration.spectra import resample
     from calibration.store import CalibrationStore
     from rig.capture.devices import open_devices
+    from rig.console import console as plain_console
     from rig.profile import load_profile
     from rig.wizard.camera import choose_camera
     from rig.wizard.common import Ask
@@ -116,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
     from rig.wizard.scale import scale_lights
     from rig.wizard.selection import selection_report
 
-    console = Console(stderr=True)
+    console = plain_console(stderr=True)
     ask: Ask | None = None if args.yes else console.input
     profile = load_profile(args.profile)
     store_root = Path(args.store).expanduser() if args.store else _default_store()
@@ -150,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
         )
         camera_grid = resample(camera_w, camera_rgb, DEFAULT_GRID, source=camera_name)
         if args.skip_scale:
-            console.print("[yellow]radiometric scale skipped: SPDs stay relative[/]")
+            console.print("radiometric scale skipped: SPDs stay relative", style="yellow")
         else:
             scale_lights(args, profile, devices, lights, camera_grid, ask, console)
         flat = None
@@ -164,17 +169,17 @@ def run(args: argparse.Namespace) -> int:
         entry = store.add_flat_field(flat_entry, *flat)
         corner = ", ".join(f"{g:.3f}" for g in flat[0].corner_gain())
         console.print(
-            f"[green]stored[/] flat field '{entry.name}' v{entry.version} (corner gain R, G, B "
+            f"stored flat field '{entry.name}' v{entry.version} (corner gain R, G, B "
             f"{corner}); decode divides the frames by it",
-            highlight=False,
+            style="green",
         )
     for light in lights:
         values = light.values * (light.scale or 1.0)
         entry = store.add_light(light.entry, light.wavelengths, values, light.provenance)
         plot_light(light, values, plots, entry.version)
     console.print(
-        f"[green]stored[/] camera '{camera_name}' and {len(lights)} light SPDs in {store.root}",
-        highlight=False,
+        f"stored camera '{camera_name}' and {len(lights)} light SPDs in {store.root}",
+        style="green",
     )
     selection_report(
         {lt.name: lt.on_grid() * (lt.scale or 1.0) for lt in lights},

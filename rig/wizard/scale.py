@@ -66,6 +66,7 @@ def scale_lights(
     console.print(table)
     if any(r[3] > MISFIT_WARNING for r in rows):
         console.print(
-            "[yellow]channel misfit above 15 %: the camera sensitivity does not match "
-            "the measured colours — measure or import the camera's sensitivity[/]"
+            "channel misfit above 15 %: the camera sensitivity does not match "
+            "the measured colours — measure or import the camera's sensitivity",
+            style="yellow",
         )

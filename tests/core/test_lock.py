@@ -122,7 +122,11 @@ def test_create_makes_the_folder_and_removes_it_if_left_empty(tmp_path: Path) ->
     folder = tmp_path / "a" / "new"
     with locked(folder, "rig capture", create=True):
         assert folder.is_dir()
-    assert not folder.exists()
+    assert not (tmp_path / "a").exists()  # the parents it made too: nothing is left behind
+    (tmp_path / "a").mkdir()
+    with locked(folder, "rig capture", create=True):
+        pass
+    assert (tmp_path / "a").is_dir() and not folder.exists()  # what was there stays
     with locked(folder, "rig capture", create=True):
         (folder / "session.yaml").write_text("x")
     assert (folder / "session.yaml").is_file() and not (folder / LOCK_FILE).exists()

@@ -128,10 +128,26 @@ def test_missing_transport_keys_are_a_rig_error() -> None:
 
 
 def test_bad_transport_values_are_a_rig_error() -> None:
-    with pytest.raises(RigError, match="tcp.*has a bad value"):
+    with pytest.raises(RigError, match=r"key 'port' is 'fivefive' .*\[1, 65535\]"):
         open_transport({"type": "tcp", "host": "127.0.0.1", "port": "fivefive"})
-    with pytest.raises(RigError, match="has a bad value"):
+    with pytest.raises(RigError, match="key 'timeout_s' is 'soon'"):
         open_transport({"type": "tcp", "host": "127.0.0.1", "port": 1, "timeout_s": "soon"})
+
+
+@pytest.mark.parametrize(
+    ("spec", "says"),
+    [
+        ({"type": "tcp", "host": "h", "port": 70_000}, r"key 'port' is 70000 .*\[1, 65535\]"),
+        ({"type": "tcp", "host": "h", "port": 1, "timeout_s": 1e308}, r"key 'timeout_s'.*3600"),
+        ({"type": "serial", "port": "/dev/x", "baudrate": 10**12}, r"key 'baudrate'"),
+        ({"type": "serial", "port": "/dev/x", "timeout_s": float("nan")}, r"key 'timeout_s'"),
+        ({"type": "hid", "vid": 0x1_0000, "pid": 1}, r"transport\.vid = 65536 is not a USB id"),
+        ({"type": "usb", "vid": 1, "pid": -1}, r"transport\.pid = -1 is not a USB id"),
+    ],
+)
+def test_transport_numbers_are_bounded_before_opening(spec: dict[str, object], says: str) -> None:
+    with pytest.raises(RigError, match=says):
+        open_transport(spec)
 
 
 # -- serial -----------------------------------------------------------------------------------

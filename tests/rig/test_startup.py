@@ -65,7 +65,7 @@ def test_session_info_loads_no_heavy_library(tmp_path: Path) -> None:
 def test_parser_constants_match_the_libraries_they_repeat() -> None:
     from calibration import defaults
     from reconstruct.poses.board import spec
-    from rig import wizard
+    from rig import cliargs, profile, wizard
     from rig.commands import board, view
     from rig.view import colour
 
@@ -75,3 +75,4 @@ def test_parser_constants_match_the_libraries_they_repeat() -> None:
     assert board.DEFAULT_MARKER_RATIO == spec.DEFAULT_MARKER_RATIO
     assert view.DEFAULT_ILLUMINANTS == colour.DEFAULT_ILLUMINANTS
     assert list(wizard.BUILTIN_CAMERAS) == defaults.camera_names()
+    assert cliargs.MAX_VIEWS == profile.MAX_VIEWS

@@ -50,6 +50,8 @@ class BoardEntry:
     measured_square_length_m: float | None = bounded(None, above=0, max=10)
 
 
+PRINT_SCALE_RANGE = (0.5, 2.0)  # a print scaled further is another board, or a typo
+
 @dataclass(frozen=True)
 class BoardSpec:
     """Geometry of a ChArUco board as designed, plus the square size measured on the print.
@@ -83,6 +85,14 @@ class BoardSpec:
             raise RigError(
                 f"measured square length {self.measured_square_length_m} m is not positive",
                 "enter the measured side of one chessboard square",
+            )
+        low, high = (f * self.square_length_m for f in PRINT_SCALE_RANGE)
+        if measured is not None and not low <= measured <= high:
+            raise RigError(
+                f"measured square length {measured:g} m is not within [{low:g}, {high:g}] m "
+                f"({PRINT_SCALE_RANGE[0]:g} to {PRINT_SCALE_RANGE[1]:g} times the designed "
+                f"{self.square_length_m:g} m)",
+                "measure the side of one chessboard square of this board's print",
             )
         if self.paper is not None and self.paper.upper() not in PAPER_SIZES_M:
             raise RigError(

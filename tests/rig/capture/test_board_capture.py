@@ -62,7 +62,7 @@ def test_capture_warns_when_the_board_is_not_in_view(tmp_path: Path) -> None:
         open_rig=fake_rig(),
     )
     text = console.export_text()
-    assert "view 1: only 0 board corners found" in text and "view 4:" in text
+    assert "view 0: only 0 board corners found" in text and "view 3:" in text
     session = Session.open(out)
     checks = session.info.board_checks
     assert all(c["corners"] == 0 and c["contrast"] == 0.0 for c in checks.values())

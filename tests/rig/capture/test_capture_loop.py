@@ -149,7 +149,7 @@ def test_prompts_name_the_view_and_q_stops(tmp_path: Path) -> None:
 
     with pytest.raises(CaptureStopped):
         run_capture(fake_profile(), tmp_path / "s", ask=ask, console=QUIET, open_rig=fake_rig())
-    assert asked[0].startswith("Move the plate to view 1/4")
+    assert asked[0].startswith("Move the plate to view 0 (1/4)")
     assert "this view: azimuth" in asked[1]
     assert sorted(r.frame for r in read_manifest(tmp_path / "s")) == list(range(8))
 

@@ -85,13 +85,13 @@ def test_person_is_asked_to_move_projector_then_camera(tmp_path: Path) -> None:
     )
     assert [a.split(" (leave")[0].split(" (coverage")[0] for a in asked] == [
         "Move the projector to placement 1/2",
-        "Move the camera (not the projector) to view 1/6",
-        "Move the camera (not the projector) to view 2/6",
-        "Move the camera (not the projector) to view 3/6",
+        "Move the camera (not the projector) to view 0 (1/6)",
+        "Move the camera (not the projector) to view 1 (2/6)",
+        "Move the camera (not the projector) to view 2 (3/6)",
         "Move the projector to placement 2/2",
-        "Move the camera (not the projector) to view 4/6",
-        "Move the camera (not the projector) to view 5/6",
-        "Move the camera (not the projector) to view 6/6",
+        "Move the camera (not the projector) to view 3 (4/6)",
+        "Move the camera (not the projector) to view 4 (5/6)",
+        "Move the camera (not the projector) to view 5 (6/6)",
     ]
     session = Session.open(out)
     assert {(f.view, f.extra["projector_placement"]) for f in session.frames} == {
