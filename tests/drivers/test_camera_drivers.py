@@ -15,6 +15,7 @@ import pytest
 from PIL import Image
 
 from core.errors import RigError
+from core.files import temporary_name
 from drivers.cameras.exif import ExifInfo, read_exif
 from drivers.cameras.files import copy_durably, write_durably
 from drivers.cameras.folder_watch import FolderWatchCamera, frame_from_files
@@ -137,7 +138,7 @@ def test_gphoto2_capture_downloads_raw_and_jpeg_with_metadata(tmp_path: Path) ->
     assert frame.paths[0].read_bytes() == b"/store/IMG_0001.CR2"
     assert (frame.exposure_s, frame.iso, frame.camera_serial) == (1 / 125, 200.0, "083012345")
     assert fake.deleted == ["IMG_0001.CR2", "IMG_0001.JPG"]
-    assert not list((tmp_path / "raw").glob("*.part"))
+    assert [p.name for p in (tmp_path / "raw").iterdir()] == ["f0000.cr2", "f0000.jpg"]
     assert cam.describe()["model"] == "Canon EOS 550D"
 
 
@@ -190,14 +191,15 @@ def test_profile_camera_settings_pick_the_cameras_own_choices(monkeypatch) -> No
         Gphoto2Camera(gp=fake_gphoto2(FakeCamera()), settings={"exposure_s": 2.0})
 
 
-def test_failed_frame_write_is_a_rig_error_and_leaves_no_part_file(tmp_path: Path) -> None:
+def test_failed_frame_write_is_a_rig_error_and_leaves_no_temporary_file(tmp_path: Path) -> None:
     source = tmp_path / "shot.cr2"
     source.write_bytes(b"raw")
-    with pytest.raises(RigError, match="cannot write a copy of .*shot.cr2"):
-        copy_durably(source, tmp_path / "missing-dir" / "frame.cr2")
+    with pytest.raises(RigError, match="missing-dir"):
+        copy_durably(source, tmp_path / "missing-dir" / "frame.cr2", move=True)
     (tmp_path / "out").mkdir()
-    (tmp_path / "out" / "frame.cr2.part").mkdir()  # the temporary name cannot be written
-    with pytest.raises(RigError, match="check disk space"):
+    # the temporary name cannot be written
+    temporary_name(tmp_path / "out" / "frame.cr2").mkdir()
+    with pytest.raises(RigError, match=r"\.frame\.tmp\.cr2 is a folder"):
         write_durably(tmp_path / "out" / "frame.cr2", b"raw")
     assert source.exists() and not (tmp_path / "out" / "frame.cr2").exists()
 
