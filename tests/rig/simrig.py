@@ -8,6 +8,8 @@ import sys
 from collections import Counter
 from pathlib import Path
 
+import yaml
+
 from core.manifest import read_manifest, verify_frames
 
 PROFILE = Path(__file__).with_name("sim-small.yaml")
@@ -36,3 +38,15 @@ def assert_complete(session: Path) -> None:
     assert verify_frames(session, records) == []
     owned = {Path(r.path).name for r in records}
     assert {p.name for p in (session / "raw").iterdir() if p.is_file()} == owned
+
+
+def capture_small_session(out: Path, views: int = 2) -> Path:
+    """A complete sim session of ``views`` views at ``out`` (the small profile, in-process)."""
+    from rig.capture import run_capture
+
+    profile = yaml.safe_load(PROFILE.read_text())
+    profile["plan"]["views"] = views
+    path = out.parent / "p.yaml"
+    path.write_text(yaml.safe_dump(profile))
+    run_capture(path, out, yes=True)
+    return out

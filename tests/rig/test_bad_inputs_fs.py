@@ -29,11 +29,10 @@ import pytest
 import trimesh
 import yaml
 from fsfaults import Faults
-from simrig import PROFILE
+from simrig import PROFILE, capture_small_session
 from test_bad_inputs import run_cli, write
 
 from calibration.store import CalibrationStore
-from rig.capture import run_capture
 
 pytest.importorskip("drivers.sim")
 ROOT = Path(__file__).parents[2]
@@ -58,13 +57,7 @@ class Case:
 
 @pytest.fixture(scope="module")
 def base_session(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("base") / "s"
-    profile = yaml.safe_load(PROFILE.read_text())
-    profile["plan"]["views"] = 2
-    path = out.parent / "p.yaml"
-    path.write_text(yaml.safe_dump(profile))
-    run_capture(path, out, yes=True)
-    return out
+    return capture_small_session(tmp_path_factory.mktemp("base") / "s")
 
 
 BASE: list[Path] = []  # the module's session, for the rows' make functions

@@ -18,10 +18,9 @@ import numpy as np
 import pytest
 import yaml
 from lockholder import hold, release_all
-from simrig import PROFILE
+from simrig import PROFILE, capture_small_session
 
 from calibration.store import CalibrationStore
-from rig.capture import run_capture
 from rig.cli import main
 
 pytest.importorskip("drivers.sim")
@@ -39,13 +38,7 @@ class Case:
 
 @pytest.fixture(scope="module")
 def base_session(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("base") / "s"
-    profile = yaml.safe_load(PROFILE.read_text())
-    profile["plan"]["views"] = 2
-    path = out.parent / "p.yaml"
-    path.write_text(yaml.safe_dump(profile))
-    run_capture(path, out, yes=True)
-    return out
+    return capture_small_session(tmp_path_factory.mktemp("base") / "s")
 
 
 # -- manifest ---------------------------------------------------------------------------------
