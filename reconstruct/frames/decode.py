@@ -9,8 +9,9 @@ level; such pixels are never used.
 Outputs in ``recon/decoded/``: ``<frame>.npy`` (H x W x 3, float16, or float32 beyond its
 range), ``<frame>_sat.npy`` (bool mask), ``index.json`` (frame -> view, illumination, files,
 skipped frames and why), and 8-bit tone-mapped copies of one frame per view in ``sfm/`` for
-structure from motion. :func:`drop_frames` deletes the frames after a run (the stage then
-decodes them again when it is next run; the index, unchanged, keeps later stages done).
+structure from motion. :func:`drop_frames` deletes the frames and SfM images after a run
+(the stage then decodes them again when it is next run; the index, unchanged, keeps later
+stages done).
 """
 
 from __future__ import annotations
@@ -108,23 +109,24 @@ class DecodeIndex:
 
 
 def frame_files(out_dir: Path) -> list[Path]:
-    """The decoded frames and saturation masks in ``out_dir`` that exist."""
+    """The decoded frames, saturation masks and SfM images in ``out_dir`` that exist."""
     if not (out_dir / INDEX).is_file():
         return []
-    frames = DecodeIndex.load(out_dir).frames
-    paths = [out_dir / name for f in frames for name in (f.image, f.saturated)]
+    index = DecodeIndex.load(out_dir)
+    paths = [out_dir / name for f in index.frames for name in (f.image, f.saturated)]
+    paths += [out_dir / SFM_DIR / name for name in index.sfm_images.values()]
     return [p for p in paths if p.is_file()]
 
 
 def frame_bytes(out_dir: Path) -> int:
-    """Bytes the decoded frames and saturation masks take in ``out_dir``."""
+    """Bytes the decoded frames, saturation masks and SfM images take in ``out_dir``."""
     return sum(p.stat().st_size for p in frame_files(out_dir))
 
 
 def drop_frames(out_dir: Path) -> int:
-    """Delete the decoded frames and saturation masks (the bulk of ``recon/``), keeping the
-    index and the SfM images; returns the bytes freed. The stage's stamp goes first, so the
-    next run decodes them again even if this one is cut short."""
+    """Delete the decoded frames, saturation masks and SfM images (the bulk of ``recon/``),
+    keeping the index; returns the bytes freed. The stage's stamp goes first, so the next run
+    decodes them again even if this one is cut short."""
     files = frame_files(out_dir)
     (out_dir / STAMP).unlink(missing_ok=True)
     freed = 0

@@ -229,10 +229,11 @@ def repair(
     conf: RepairConfig | None = None,
     hull: trimesh.Trimesh | None = None,
     voxel: float | None = None,
+    fix: str = FIX,
 ) -> tuple[trimesh.Trimesh, dict[str, Any]]:
     """A subdividable mesh from ``mesh`` and what was done to it; with the visual ``hull``
     and its ``voxel`` size, also how far the mesh lies from it. Raises :class:`RigError`
-    when the mesh is beyond repair."""
+    with ``fix`` as the hint when the mesh is beyond repair."""
     conf = conf or RepairConfig()
     found = defects(mesh)
     report: dict[str, Any] = {"found": asdict(found), "actions": []}
@@ -243,7 +244,7 @@ def repair(
             f"{len(mesh.faces) - len(out.faces)} faces (duplicate, degenerate) removed")
     if len(out.faces) == 0:
         raise RigError(f"the initial mesh has no usable face ({len(mesh.faces)} faces, all "
-                       "degenerate or repeated)", FIX)
+                       "degenerate or repeated)", fix)
     pieces = object_pieces(out, conf.keep_fraction)
     count = _components(out)[0]
     if len(pieces) < count:
@@ -276,6 +277,6 @@ def repair(
     raise RigError(
         f"the initial mesh is beyond repair: {left.non_manifold_edges} non-manifold edges, "
         f"{left.non_manifold_vertices} non-manifold vertices, {left.components} pieces, "
-        f"{len(out.vertices)} points, {len(out.faces)} faces (at least {conf.min_faces} "
-        "needed)", FIX,
+        f"{len(out.vertices)} points, {len(out.faces)} faces (mesh.repair.min_faces: "
+        f"{conf.min_faces})", fix,
     )

@@ -356,7 +356,11 @@ def _initial(
 ) -> None:
     info: dict[str, Any]
     if user is not None:
-        mesh, repaired = repair(load_user_mesh(user), conf.repair)
+        mesh, repaired = repair(
+            load_user_mesh(user), conf.repair,
+            fix=f"give {user} as one closed, consistently wound surface, or leave "
+            "--initial-mesh out to build the mesh from the images",
+        )
         info = {"method": "given", "source": str(user), "repair": repaired}
     else:
         posed = posed or load_poses(poses_dir)

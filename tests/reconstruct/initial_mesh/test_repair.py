@@ -131,7 +131,7 @@ def test_a_mesh_beyond_repair_stops_with_the_numbers() -> None:
         repair(flat)
     assert "--initial-mesh" in str(error.value) and "\n" not in str(error.value)
     with pytest.raises(RigError, match=r"beyond repair: 0 non-manifold edges.* 4 faces "
-                       r"\(at least 20 needed\)") as error:
+                       r"\(mesh.repair.min_faces: 20\)") as error:
         repair(tetrahedron(1.0))
     assert "more views" in str(error.value)
 

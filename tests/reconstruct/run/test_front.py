@@ -96,6 +96,18 @@ def test_a_broken_initial_mesh_is_repaired_before_subdivision(
     assert len(result.mesh.faces) > len(sphere.faces)  # it was subdivided
 
 
+def test_a_mesh_beyond_repair_stops_the_initial_mesh_stage(
+    make_session: Callable[..., Path], tmp_path: Path
+) -> None:
+    root = make_session(views=6, illuminations=("white",))
+    path = tmp_path / "box.ply"
+    trimesh.creation.box(extents=(RADIUS,) * 3).export(path)  # 12 faces: nothing to refine
+    with pytest.raises(RigError, match=r"initial mesh is beyond repair: .*12 faces") as error:
+        run_front(root, initial_mesh_file=path)
+    assert f"give {path}" in str(error.value) and "\n" not in str(error.value)
+    assert not (root / "recon" / "subdivide").exists()
+
+
 def test_config_errors(tmp_path: Path) -> None:
     with pytest.raises(RigError, match="'optimise' is not known"):
         FrontConfig.from_mapping({"optimise": {}})

@@ -31,6 +31,7 @@ def test_frames_deleted_after_export_and_decoded_again_on_resume(tmp_path: Path)
     assert disk["stages"]["decoded"] > 0 and disk["decoded_frames_deleted"] > 0
     assert disk["left"] == pytest.approx(disk["total"] - disk["decoded_frames_deleted"], abs=0.2)
     assert frames_in(recon) == [] and (recon / "decoded" / "index.json").is_file()
+    assert not list((recon / "decoded" / "sfm").glob("*"))
     assert not (recon / "decoded" / ".stamp.json").exists()  # decode must run again
     index_mtime = (recon / "decoded" / "index.json").stat().st_mtime_ns
     vertices = read_mesh(recon / "mesh.ply").vertices
@@ -44,5 +45,6 @@ def test_frames_deleted_after_export_and_decoded_again_on_resume(tmp_path: Path)
     assert "resuming the optimisation" in (recon / "log.txt").read_text()
     np.testing.assert_allclose(read_mesh(recon / "mesh.ply").vertices, vertices, atol=1e-9)
     assert len(frames_in(recon)) == 2 * 16  # 16 frames: image and saturation mask each
+    assert len(list((recon / "decoded" / "sfm").glob("*"))) == 8  # one per view
     report = json.loads((recon / "report.json").read_text())
     assert report["intermediates_mb"]["decoded_frames_deleted"] == 0
