@@ -73,11 +73,12 @@ def summary(console: Console, rec: Reconstruction) -> None:
     table.add_row("time", f"{sum(rec.report['timings_s'].values()):.1f} s")
     disk = rec.report["intermediates_mb"]
     deleted = disk["decoded_frames_deleted"]
+    stages = ", ".join(f"{k} {v:.0f}" for k, v in disk["stages"].items() if v >= 0.5)
     table.add_row(
         "intermediates",
-        f"{disk['left']:.0f} MB left in recon/"
-        + (f" ({deleted:.0f} MB of decoded frames deleted)" if deleted else "")
-        + " · " + ", ".join(f"{k} {v:.0f}" for k, v in disk["stages"].items() if v >= 0.5),
+        f"{disk['total']:.0f} MB ({stages})"
+        + (f"; {deleted:.0f} MB of decoded frames deleted, {disk['left']:.0f} MB left"
+           if deleted else ""),
     )
     for path in (rec.mesh_path, rec.reflectance_path, rec.report_path, *rec.plots):
         table.add_row(path.name, str(path))
