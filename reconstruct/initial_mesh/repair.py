@@ -3,7 +3,7 @@
 The √3 subdivision needs one consistently oriented, edge-manifold surface; a Poisson mesh of
 a sparse cloud or a mesh from another tool often is not. The order, cheapest first:
 
-1. clean: merge duplicate vertices, drop degenerate and duplicated faces;
+1. clean: merge duplicate vertices, drop collapsed (a corner repeated) and repeated faces;
 2. keep the pieces that carry the object (at least ``keep_fraction`` of the largest piece's
    area; a spray of floaters goes);
 3. orient each piece outward (``trimesh.repair.fix_normals``) and fill single-triangle and
@@ -147,9 +147,12 @@ def non_manifold_faces(mesh: trimesh.Trimesh) -> np.ndarray:
 
 
 def clean(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
-    """Duplicate vertices merged, degenerate and duplicated faces and loose vertices gone."""
+    """Duplicate vertices merged, collapsed faces (a corner repeated) and repeated faces and
+    loose vertices gone. Faces of zero area on three distinct corners stay: dropping them
+    opens holes in a closed mesh (a hull flattened onto the board has many)."""
     out = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), process=True)
-    out.update_faces(out.nondegenerate_faces())
+    f = out.faces
+    out.update_faces((f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0]))
     out.update_faces(out.unique_faces())
     out.remove_unreferenced_vertices()
     return out
@@ -241,10 +244,10 @@ def repair(
     if (len(out.vertices), len(out.faces)) != (len(mesh.vertices), len(mesh.faces)):
         report["actions"].append(
             f"cleaned: {len(mesh.vertices) - len(out.vertices)} vertices and "
-            f"{len(mesh.faces) - len(out.faces)} faces (duplicate, degenerate) removed")
+            f"{len(mesh.faces) - len(out.faces)} faces (repeated, collapsed) removed")
     if len(out.faces) == 0:
         raise RigError(f"the initial mesh has no usable face ({len(mesh.faces)} faces, all "
-                       "degenerate or repeated)", fix)
+                       "collapsed or repeated)", fix)
     pieces = object_pieces(out, conf.keep_fraction)
     count = _components(out)[0]
     if len(pieces) < count:

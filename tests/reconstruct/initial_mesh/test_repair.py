@@ -126,9 +126,9 @@ def test_a_mesh_far_from_the_hull_is_replaced_by_it() -> None:
 
 
 def test_a_mesh_beyond_repair_stops_with_the_numbers() -> None:
-    flat = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2]], process=False)
+    collapsed = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [1, 0, 0]], [[0, 1, 2]], process=False)
     with pytest.raises(RigError, match="no usable face") as error:
-        repair(flat)
+        repair(collapsed)
     assert "--initial-mesh" in str(error.value) and "\n" not in str(error.value)
     with pytest.raises(RigError, match=r"beyond repair: 0 non-manifold edges.* 4 faces "
                        r"\(mesh.repair.min_faces: 20\)") as error:
@@ -155,3 +155,17 @@ def test_two_spheres_touching_at_a_point_lose_a_few_faces_not_their_shape() -> N
     assert defects(out).subdividable and defects(out).non_manifold_vertices == 0
     assert any(a.startswith("dropped") for a in report["actions"]), report
     assert 0 < 2 * len(one.faces) - len(out.faces) <= 10
+
+
+def test_a_face_of_zero_area_in_a_closed_mesh_stays() -> None:
+    """Clamping the hull to the board (z >= 0) leaves faces of zero area on three distinct
+    corners; they still close the surface, and dropping them would open holes."""
+    mesh = sphere()
+    a, b, c = mesh.faces[0]
+    vertices = mesh.vertices.copy()
+    vertices[c] = (vertices[a] + vertices[b]) / 2  # face 0 becomes a sliver of no area
+    sliver = trimesh.Trimesh(vertices, mesh.faces, process=False)
+    assert not sliver.nondegenerate_faces()[0]
+    out, report = repair(sliver)
+    assert out.is_watertight and defects(out).subdividable
+    assert len(out.faces) == len(mesh.faces) and report["actions"] == []
