@@ -10,7 +10,9 @@ demosaic neighbourhood is at or near the white level; such pixels are never used
 Outputs in ``recon/decoded/``: ``<frame>.npy`` (H x W x 3, float16, or float32 beyond its
 range), ``<frame>_sat.npy`` (bool mask), ``index.json`` (frame -> view, illumination, files,
 skipped frames and why), and 8-bit tone-mapped copies of one frame per view in ``sfm/`` for
-structure from motion.
+structure from motion. :func:`drop_frames` deletes the frames and SfM images after a run
+(the stage then decodes them again when it is next run; the index, unchanged, keeps later
+stages done).
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ from core.manifest import MANIFEST_FILE, FrameRecord, verify_frames
 from core.manifest_check import check_session
 from core.session import Session
 from reconstruct.frames.raw import read_linear_rgb
-from reconstruct.stages.resumable import run_stage
+from reconstruct.stages.resumable import STAMP, run_stage
 
 log = logging.getLogger("reconstruct.frames.decode")
 
@@ -101,7 +103,40 @@ class DecodeIndex:
             "skipped": self.skipped,
             "sfm_images": {str(k): v for k, v in self.sfm_images.items()},
         }
-        write_bytes_atomically(out_dir / INDEX, json.dumps(data, indent=1).encode())
+        text = json.dumps(data, indent=1).encode()
+        path = out_dir / INDEX
+        # an unchanged index keeps its mtime: frames decoded again after drop_frames leave
+        # the later stages, which hash it, up to date
+        if not (path.is_file() and path.read_bytes() == text):
+            write_bytes_atomically(path, text)
+
+
+def frame_files(out_dir: Path) -> list[Path]:
+    """The decoded frames, saturation masks and SfM images in ``out_dir`` that exist."""
+    if not (out_dir / INDEX).is_file():
+        return []
+    index = DecodeIndex.load(out_dir)
+    paths = [out_dir / name for f in index.frames for name in (f.image, f.saturated)]
+    paths += [out_dir / SFM_DIR / name for name in index.sfm_images.values()]
+    return [p for p in paths if p.is_file()]
+
+
+def frame_bytes(out_dir: Path) -> int:
+    """Bytes the decoded frames, saturation masks and SfM images take in ``out_dir``."""
+    return sum(p.stat().st_size for p in frame_files(out_dir))
+
+
+def drop_frames(out_dir: Path) -> int:
+    """Delete the decoded frames, saturation masks and SfM images (the bulk of ``recon/``),
+    keeping the index; returns the bytes freed. The stage's stamp goes first, so the next run
+    decodes them again even if this one is cut short."""
+    files = frame_files(out_dir)
+    (out_dir / STAMP).unlink(missing_ok=True)
+    freed = 0
+    for path in files:
+        freed += path.stat().st_size
+        path.unlink()
+    return freed
 
 
 def load_frame(out_dir: Path, frame: DecodedFrame) -> tuple[np.ndarray, np.ndarray]:

@@ -55,6 +55,7 @@ from reconstruct.initial_mesh.point_cloud import (
     trim_to_cloud,
 )
 from reconstruct.initial_mesh.projector_pose import light_positions, projector_pose
+from reconstruct.initial_mesh.repair import RepairConfig, repair
 from reconstruct.initial_mesh.structured_light import DecodeOptions, GrayDecoding, decode_gray
 from reconstruct.initial_mesh.triangulation import (
     Observer,
@@ -352,6 +353,8 @@ def _procam(
         if conf.trim_distance > 0
         else keep_large_pieces(mesh, 0.05)
     )
+    # the pieces are chosen above; the repair only orients, closes and re-meshes
+    mesh, repaired = repair(mesh, RepairConfig(keep_fraction=0.0))
     mesh.export(out_dir / MESH)
     lights = light_positions(
         {v: (view_placement[v] if not plate else v) for v in decoded}, placement_poses
@@ -365,7 +368,7 @@ def _procam(
         "points": len(points), "outliers_dropped": int((~keep).sum()),
         "median_rms_px": float(np.median(np.concatenate(cloud.residuals))),
         "vertices": len(mesh.vertices), "faces": len(mesh.faces),
-        "placements": info_placements,
+        "placements": info_placements, "repair": repaired,
     }
     write_bytes_atomically(out_dir / SUMMARY, json.dumps(summary, indent=1).encode())
     log.info("procam initial mesh: %d points -> %d vertices", len(points), len(mesh.vertices))

@@ -46,6 +46,7 @@ from reconstruct.initial_mesh.dense.stereo import (
     thin,
 )
 from reconstruct.initial_mesh.dense.visual_hull import silhouette_votes, visual_hull_points
+from reconstruct.initial_mesh.repair import RepairConfig, repair
 from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.model.raycast import RayCaster
 from reconstruct.poses.board import BoardSpec
@@ -103,6 +104,7 @@ class MeshConfig:
     patchmatch: PatchMatchConfig = field(default_factory=PatchMatchConfig)
     board: Mapping[str, Any] | BoardSpec | None = None
     floor_margin_m: float = bounded(0.001, min=0.0, max=10.0)
+    repair: RepairConfig = field(default_factory=RepairConfig)
 
 
 def mesh_config(data: Mapping[str, Any], where: str = "config") -> MeshConfig:
@@ -218,6 +220,7 @@ def dense_mesh(
 
     depth = int(np.ceil(np.log2(conf.voxels)))
     mesh, points, normals, voxel = hull(masks)
+    hull_surface = mesh
     info: dict[str, Any] = {"method": "visual_hull+poisson", "views": len(masks), "voxel": voxel,
                             "hull_points": len(points), "poisson_depth": depth,
                             "silhouettes": "dark_background" if board is None else "board"}
@@ -269,6 +272,7 @@ def dense_mesh(
         vertices = np.array(mesh.vertices)
         vertices[:, 2] = np.maximum(vertices[:, 2], 0.0)
         mesh = trimesh.Trimesh(vertices, mesh.faces, process=False)
+    mesh, info["repair"] = repair(mesh, conf.repair, hull_surface, voxel)
     return mesh, info
 
 
@@ -352,10 +356,17 @@ def _initial(
 ) -> None:
     info: dict[str, Any]
     if user is not None:
-        mesh, info = load_user_mesh(user), {"method": "given", "source": str(user)}
+        mesh, repaired = repair(
+            load_user_mesh(user), conf.repair,
+            fix=f"give {user} as one closed, consistently wound surface, or leave "
+            "--initial-mesh out to build the mesh from the images",
+        )
+        info = {"method": "given", "source": str(user), "repair": repaired}
     else:
         posed = posed or load_poses(poses_dir)
         mesh, info = dense_mesh(decoded_dir, poses_dir, conf, out_dir, posed)
+    if info["repair"]["actions"]:
+        log.warning("initial mesh repaired: %s", "; ".join(info["repair"]["actions"]))
     mesh.export(out_dir / MESH)
     info |= {"vertices": len(mesh.vertices), "faces": len(mesh.faces),
              "watertight": bool(mesh.is_watertight)}

@@ -93,10 +93,12 @@ def run_logged(
     verbosity: int = 0,
     console: Console | None = None,
     terminal: bool = True,
+    keep_intermediates: bool = False,
 ) -> Reconstruction:
     """:func:`run_reconstruction` as the CLI runs it: chatter in ``recon/log.txt``, COLMAP's
     lines too unless ``verbosity >= 2``, the optimiser's iterations as progress bars (only
-    logged when ``terminal`` is false); ``session`` opened by the caller, or its folder."""
+    logged when ``terminal`` is false), the decoded frames deleted after a successful export
+    unless ``keep_intermediates``; ``session`` opened by the caller, or its folder."""
     session = Session.of(session)  # a missing session fails before recon/ is made
     # so does a manifest that `rig session verify` or `rig capture --resume` would refuse
     check_session(session.root, session.frames, session.root / MANIFEST_FILE)
@@ -105,4 +107,5 @@ def run_logged(
         captured_output(session.root / RECON_DIR, native=verbosity >= 2, terminal=terminal),
         IterationProgress.for_config(config, console, show=terminal) as iterations,
     ):
-        return run_reconstruction(session, config, initial_mesh, iterations)
+        return run_reconstruction(session, config, initial_mesh, iterations,
+                                  keep_intermediates=keep_intermediates)

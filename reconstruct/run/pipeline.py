@@ -34,7 +34,7 @@ from core.lock import locked
 from core.session import Session
 from core.yamlio import read_yaml
 from reconstruct.frames.ambient import exposure_ratio, subtract_ambient
-from reconstruct.frames.decode import FLOAT16_RANGE, load_frame
+from reconstruct.frames.decode import FLOAT16_RANGE, drop_frames, frame_bytes, load_frame
 from reconstruct.model.camera import Intrinsics
 from reconstruct.model.raycast import RayCaster
 from reconstruct.optimise.checkpoint import FILE as CHECKPOINT_FILE
@@ -48,6 +48,7 @@ from reconstruct.outputs import export, plots
 from reconstruct.outputs.relight import Camera, encode_srgb, relight
 from reconstruct.run.front import FrontConfig, FrontResult, run_front
 from reconstruct.run.status import RunStatus, tracked
+from reconstruct.stages.disk import stage_sizes_mb
 from reconstruct.stages.memory import peak_rss_mb, reset_peak_rss
 from reconstruct.stages.publish import publish, staging_dir
 from reconstruct.stages.resumable import Timings, timed_run
@@ -348,6 +349,16 @@ def export_result(
     return figures, report, mesh_path, npz, report_path
 
 
+def intermediates(recon_dir: Path, keep: bool) -> dict[str, Any]:
+    """Megabytes in each stage folder, their total, and what is left once the decoded frames
+    are deleted after the export (unless ``keep``)."""
+    sizes = stage_sizes_mb(recon_dir)
+    total = round(sum(sizes.values()), 1)
+    frames = 0.0 if keep else round(frame_bytes(recon_dir / "decoded") / 1e6, 1)
+    return {"stages": sizes, "total": total, "decoded_frames_deleted": frames,
+            "left": round(total - frames, 1)}
+
+
 # Below this ratio of the farthest to the nearest camera distance the light's distance on the
 # camera plate trades against the reflectance scale (all views see the same inverse-square
 # falloff; docs/usage-reconstruct.md).
@@ -403,10 +414,12 @@ def run_reconstruction(
     initial_mesh: Path | None = None,
     progress: Progress | None = None,
     basis: SpectralBasis | None = None,
+    keep_intermediates: bool = True,
 ) -> Reconstruction:
     """Both halves of the pipeline on a session (opened by the caller, or its folder; opened
     once either way); outputs in ``SESSION/recon/``. The session is locked (core.lock) for
-    the whole run."""
+    the whole run. Without ``keep_intermediates`` the decoded frames are deleted after a
+    successful export (a later run decodes them again)."""
     conf = dict(config or {})
     opt_conf = conf.pop("optimise", None)
     settings = OptimiseSettings.from_mapping(opt_conf, "config optimise")
@@ -417,7 +430,7 @@ def run_reconstruction(
         timed_run(session.recon_dir) as timings,
     ):
         rec = _run(session, conf, opt_conf, settings, initial_mesh, progress, basis, status,
-                   timings)
+                   timings, keep_intermediates)
         if rec.report["skipped_frames"]:
             status.end("complete", skipped_frames=len(rec.report["skipped_frames"]))
     return rec
@@ -433,6 +446,7 @@ def _run(
     basis: SpectralBasis | None,
     status: RunStatus,
     timings: Timings,
+    keep_intermediates: bool,
 ) -> Reconstruction:
     t0 = time.perf_counter()
     status.stage("front")
@@ -473,6 +487,7 @@ def _run(
         "flat_field": flat_field_report(session),
         "timings_s": {"front": t_front, "load_frames": t_load},
         "peak_rss_mb": peaks,
+        "intermediates_mb": intermediates(recon, keep_intermediates),
     }
     status.stage("export")
     staging = staging_dir(recon)
@@ -480,6 +495,10 @@ def _run(
         staging, inp, result, settings, extra
     )
     publish(recon, staging)
+    if not keep_intermediates:
+        freed = drop_frames(front.decoded_dir)
+        log.info("deleted the decoded frames (%.1f MB); a later run decodes them again",
+                 freed / 1e6)
     timings.record(
         "export", report["timings_s"]["export"], False, report["peak_rss_mb"]["export"]
     )

@@ -36,6 +36,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="YAML with sections decode, poses, mesh, procam, visibility, subdivide, optimise",
     )
     parser.add_argument(
+        "--keep-intermediates",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="keep the decoded frames in SESSION/recon/decoded after a successful export "
+        "(by default they are deleted: the bulk of recon/; a later run decodes them again)",
+    )
+    parser.add_argument(
         "--status",
         action="store_true",
         help="print the state of the last run on SESSION (running, complete, failed, "
@@ -65,6 +72,15 @@ def summary(console: Console, rec: Reconstruction) -> None:
         "reflectance scale", "absolute" if rec.report["reflectance_scale_absolute"] else "relative"
     )
     table.add_row("time", f"{sum(rec.report['timings_s'].values()):.1f} s")
+    disk = rec.report["intermediates_mb"]
+    deleted = disk["decoded_frames_deleted"]
+    stages = ", ".join(f"{k} {v:.0f}" for k, v in disk["stages"].items() if v >= 0.5)
+    table.add_row(
+        "intermediates",
+        f"{disk['total']:.0f} MB ({stages})"
+        + (f"; {deleted:.0f} MB of decoded frames deleted, {disk['left']:.0f} MB left"
+           if deleted else ""),
+    )
     for path in (rec.mesh_path, rec.reflectance_path, rec.report_path, *rec.plots):
         table.add_row(path.name, str(path))
     console.print(table)
@@ -101,7 +117,8 @@ def handle(args: argparse.Namespace) -> int:
     config = load_config(args.config)
     session = Session.open(args.session)  # a wrong path fails now, not after the warm-up
     compile_kernels_once(console)
-    rec = run_logged(session, config, args.initial_mesh, args.verbose, console)
+    rec = run_logged(session, config, args.initial_mesh, args.verbose, console,
+                     keep_intermediates=args.keep_intermediates)
     summary(console, rec)
     print(printable(rec.recon_dir))
     skipped = rec.report["skipped_frames"]

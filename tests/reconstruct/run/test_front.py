@@ -13,7 +13,9 @@ import trimesh
 from front_synthetic import RADIUS, build_session, dented_sphere
 
 from core.errors import RigError
+from reconstruct.geometry.subdivide import sqrt3_step
 from reconstruct.initial_mesh.dense.poisson import read_mesh
+from reconstruct.initial_mesh.repair import defects
 from reconstruct.run.front import FrontConfig, run_front
 
 FAST = {"mesh": {"voxels": 64}}
@@ -62,6 +64,48 @@ def test_given_initial_mesh_is_subdivided(
     assert info["steps"] >= 2
     assert len(result.mesh.faces) == len(coarse.faces) * 3 ** info["steps"]
     assert json.loads((result.recon_dir / "mesh" / "initial.json").read_text())["method"] == "given"
+
+
+def test_a_broken_initial_mesh_is_repaired_before_subdivision(
+    make_session: Callable[..., Path], tmp_path: Path
+) -> None:
+    """A fin on an edge, a flipped patch, repeated faces and floaters: subdivision used to stop
+    on such a mesh ("non-manifold or inconsistently oriented"); the front repairs it first."""
+    root = make_session(views=6, illuminations=("white",))
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=RADIUS)
+    faces = sphere.faces.copy()
+    faces[:12] = faces[:12, ::-1]
+    a, b = sphere.faces[100, :2]
+    fin = len(sphere.vertices)
+    floaters = [trimesh.creation.icosahedron().apply_scale(RADIUS / 50).apply_translation(
+        [RADIUS * 2, 0, RADIUS * k / 10]) for k in range(5)]
+    pieces = [trimesh.Trimesh(np.vstack([sphere.vertices, 1.3 * sphere.vertices[[a]]]),
+                              np.vstack([faces, faces[:20], [[a, b, fin]]])), *floaters]
+    offsets = np.cumsum([0] + [len(p.vertices) for p in pieces[:-1]])
+    broken = trimesh.Trimesh(np.vstack([p.vertices for p in pieces]),
+                             np.vstack([p.faces + k for p, k in zip(pieces, offsets, strict=True)]),
+                             process=False)
+    with pytest.raises(RigError, match="non-manifold or inconsistently oriented"):
+        sqrt3_step(broken.vertices, broken.faces)
+    path = tmp_path / "broken.ply"
+    broken.export(path)
+    result = run_front(root, {"subdivide": {"target_px": 3.0}}, initial_mesh_file=path)
+    info = json.loads((result.recon_dir / "mesh" / "initial.json").read_text())
+    assert info["watertight"] and len(info["repair"]["actions"]) >= 3, info["repair"]
+    assert defects(result.mesh).subdividable and result.mesh.is_watertight
+    assert len(result.mesh.faces) > len(sphere.faces)  # it was subdivided
+
+
+def test_a_mesh_beyond_repair_stops_the_initial_mesh_stage(
+    make_session: Callable[..., Path], tmp_path: Path
+) -> None:
+    root = make_session(views=6, illuminations=("white",))
+    path = tmp_path / "box.ply"
+    trimesh.creation.box(extents=(RADIUS,) * 3).export(path)  # 12 faces: nothing to refine
+    with pytest.raises(RigError, match=r"initial mesh is beyond repair: .*12 faces") as error:
+        run_front(root, initial_mesh_file=path)
+    assert f"give {path}" in str(error.value) and "\n" not in str(error.value)
+    assert not (root / "recon" / "subdivide").exists()
 
 
 def test_config_errors(tmp_path: Path) -> None:
