@@ -32,15 +32,8 @@ from bench._common import ResultTable, machine_info, make_console, report
 from bench.external_scene import CAMSPEC_TXT, DATA, LAMPS_CSV, data_file
 from calibration import defaults
 from calibration.basis import default_basis
-from calibration.camera_fit import (
-    DEFAULT_COMPONENTS,
-    TrainingSet,
-    build_prior,
-    chart_coordinates,
-    fit_camera,
-    read_camspec,
-    simulate_patches,
-)
+from calibration.camera_fit import chart_coordinates, fit_camera, simulate_patches
+from calibration.camera_prior import DEFAULT_COMPONENTS, TrainingSet, build_prior, read_camspec
 from calibration.colour_difference import DEFAULT_ILLUMINANTS, delta_e00, illuminant
 from calibration.estimation import estimate_reflectance, response_matrices
 from calibration.grid import DEFAULT_GRID

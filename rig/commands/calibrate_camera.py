@@ -20,10 +20,11 @@ from rig.outpaths import output_file
 if TYPE_CHECKING:
     import numpy as np
 
-    from calibration.camera_fit import CameraFit, TrainingSet
+    from calibration.camera_fit import CameraFit
+    from calibration.camera_prior import TrainingSet
     from calibration.store import CalibrationStore
 
-DEFAULT_COMPONENTS = 4  # = calibration.camera_fit.DEFAULT_COMPONENTS
+DEFAULT_COMPONENTS = 4  # = calibration.camera_prior.DEFAULT_COMPONENTS
 PRIOR_HELP = (
     "measured sensitivities the prior is learnt from: a camspec file or a folder of them (e.g. "
     "Jiang et al.'s database, camspec_database_27.txt); default: the cameras in the store"
@@ -54,7 +55,7 @@ def _raw_patches(path: Path) -> np.ndarray:
 
 
 def _training(args: argparse.Namespace, store: CalibrationStore) -> TrainingSet:
-    from calibration.camera_fit import read_camspec, training_set_from_store
+    from calibration.camera_prior import read_camspec, training_set_from_store
 
     if args.prior:
         return read_camspec(args.prior)
@@ -67,7 +68,7 @@ def _provenance(
     lamps: list[str],
     fit: CameraFit,
 ) -> dict[str, Any]:
-    from calibration.camera_fit import CHART_FIT_METHOD
+    from calibration.camera_prior import CHART_FIT_METHOD
 
     sources = args.from_chart or args.patches
     versions = [f"{n} v{store.entry(n, kind='light').version}" for n in lamps]
@@ -126,8 +127,9 @@ def run(args: argparse.Namespace, store: CalibrationStore) -> int:
     import numpy as np
 
     from calibration import defaults
-    from calibration.camera_fit import build_prior, fit_camera, read_patch_csv
+    from calibration.camera_fit import fit_camera, read_patch_csv
     from calibration.camera_fit_plot import plot_camera_fit
+    from calibration.camera_prior import build_prior
     from calibration.grid import DEFAULT_GRID
     from rig.console import console as plain_console
 

@@ -11,15 +11,12 @@ import pytest
 from calibration import defaults
 from calibration.camera_fit import (
     PatchNoise,
-    TrainingSet,
-    build_prior,
     chart_coordinates,
     fit_camera,
-    read_camspec,
     simulate_patches,
-    training_set_from_store,
     validate_patches,
 )
+from calibration.camera_prior import TrainingSet, build_prior, read_camspec, training_set_from_store
 from calibration.grid import DEFAULT_GRID
 from calibration.importers import read_spectrum
 from calibration.spectra import resample

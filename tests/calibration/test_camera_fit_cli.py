@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from calibration import defaults
-from calibration.camera_fit import DEFAULT_COMPONENTS, read_camspec, simulate_patches
+from calibration.camera_fit import simulate_patches
+from calibration.camera_prior import DEFAULT_COMPONENTS, read_camspec
 from calibration.store import CalibrationStore
 from rig.cli import main
 from rig.commands import calibrate_camera
