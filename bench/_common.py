@@ -21,6 +21,7 @@ from rich.console import Console
 from rich.table import Table
 
 from calibration.colour_difference import DEFAULT_ILLUMINANTS
+from calibration.grid import DEFAULT_GRID
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_OUT = REPO / "bench" / "results"
@@ -158,13 +159,55 @@ def colour_cells(colour: Sequence[dict[str, Any]]) -> list[str]:
 
 def information_floor(session: Path) -> dict[str, Any]:
     """The information floor of a sim or external session's illuminations and camera
-    (:func:`reconstruct.outputs.evaluate.information_floor` on its ground truth)."""
+    (:func:`reconstruct.outputs.evaluate.information_floor` on its ground truth), with its
+    ``brightness`` (:func:`brightness`)."""
+    from calibration.basis import default_basis
+    from calibration.estimation import noise_free_estimate
     from core.session import Session
     from reconstruct.outputs.evaluate import information_floor as floor
     from reconstruct.run.pipeline import session_responses
 
     responses = session_responses(Session.open(session))
-    return floor(session / "ground_truth" / "reflectance.npy", responses)
+    truth_path = session / "ground_truth" / "reflectance.npy"
+    truth = np.load(truth_path)
+    estimate = noise_free_estimate(truth, responses, default_basis())
+    return {**floor(truth_path, responses), "brightness": brightness(estimate, truth, responses)}
+
+
+CAMERA_BAND = 0.1
+"""Wavelengths where the summed response of all illuminations reaches this share of its peak
+are the ones the camera sees; the rest is filled in by the estimator's prior."""
+
+
+def brightness(
+    estimate: np.ndarray,
+    truth: np.ndarray,
+    responses: np.ndarray,
+    wavelengths: np.ndarray = DEFAULT_GRID.wavelengths,
+) -> dict[str, float]:
+    """Median over vertices of mean(estimate) / mean(truth) per vertex (P, N_λ): over all
+    wavelengths (``all``), inside the band the camera sees under the illuminations
+    (``in_band``) and outside it (``out_of_band``), and the band's ends in nm.
+    A bias in band is radiometric; one only out of band is the estimator's prior."""
+    seen = np.sum(np.asarray(responses, dtype=float), axis=(0, 1))
+    band = seen >= CAMERA_BAND * seen.max()
+    est, ref = np.asarray(estimate, dtype=float), np.asarray(truth, dtype=float)
+    ok = np.all(np.isfinite(est), axis=1)
+    est, ref = est[ok], ref[ok]
+
+    def ratio(columns: np.ndarray) -> float:
+        if not columns.any():
+            return float("nan")
+        return float(np.median(est[:, columns].mean(axis=1) / ref[:, columns].mean(axis=1)))
+
+    inside = np.flatnonzero(band)
+    return {
+        "all": ratio(np.ones_like(band)),
+        "in_band": ratio(band),
+        "out_of_band": ratio(~band),
+        "band_first_nm": float(wavelengths[inside[0]]),
+        "band_last_nm": float(wavelengths[inside[-1]]),
+    }
 
 
 def report(

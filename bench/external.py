@@ -30,6 +30,7 @@ from bench._common import (
     COLOUR_COLUMNS,
     DEFAULT_OUT,
     ResultTable,
+    brightness,
     colour_cells,
     fmt,
     information_floor,
@@ -130,6 +131,27 @@ def per_patch_rmse(npz: Path, out: Path, truth: Path) -> dict[int, float]:
     return {int(k): float(rmse[observed & (p == k)].mean()) for k in np.unique(p[observed])}
 
 
+def reflectance_brightness(npz: Path, session: Path) -> dict[str, float]:
+    """:func:`bench._common.brightness` of a reflectance.npz's observed vertices against the
+    truth (each vertex compared with its nearest true vertex)."""
+    from core.session import Session
+    from reconstruct.outputs import export
+    from reconstruct.outputs.evaluate import load_mesh
+    from reconstruct.run.pipeline import session_responses
+
+    truth = session / "ground_truth"
+    data = export.read_reflectance_npz(npz)
+    vertices = np.asarray(data["vertices"])
+    observed = np.asarray(data.get("observed", np.ones(len(vertices))), dtype=bool)
+    gt = load_mesh(truth / "mesh.ply")
+    _, nearest = cKDTree(np.asarray(gt.vertices)).query(vertices[observed])
+    return brightness(
+        np.asarray(data["reflectance"])[observed],
+        np.load(truth / "reflectance.npy")[nearest],
+        session_responses(Session.open(session)),
+    )
+
+
 def run_scene(
     spec: SceneSpec, size: Size, out: Path, cache: Path, data: Path, config: dict[str, Any]
 ) -> dict[str, Any]:
@@ -179,6 +201,8 @@ def run_scene(
         "colour": final["colour"],
         "oracle_colour": oracle["colour"],
         "floor": information_floor(session),
+        "brightness": reflectance_brightness(rec.reflectance_path, session),
+        "oracle_brightness": reflectance_brightness(folder / "oracle" / "reflectance.npz", session),
         "light_offset_error_m": final["light_offset_error_m"],
         "peak_rss_mb": peak_rss_mb(),
         "error_maps": [str(p) for p in sorted(folder.rglob("*error_map.png"))],
@@ -213,6 +237,10 @@ def tables(results: list[dict[str, Any]]) -> list[ResultTable]:
         "Colour: spectral RMSE and CIEDE2000 (CIE 1931 2°) against the truth",
         ["scene", "method", "RMSE mean", *COLOUR_COLUMNS],
     )
+    bright = ResultTable(
+        "Brightness: median over vertices of mean(estimate) / mean(truth), bench/README.md",
+        ["scene", "method", "all wavelengths", "camera band", "outside the band"],
+    )
     cost = ResultTable("Cost", ["scene", "render (s)", "stages (s)", "peak RSS (MB)"])
     for r in results:
         i, f = r["initial"], r["final"]
@@ -235,9 +263,17 @@ def tables(results: list[dict[str, Any]]) -> list[ResultTable]:
                    fmt(r["oracle_rmse_mean"]), *colour_cells(r["oracle_colour"]))  # fmt: skip
         colour.add(r["scene"], "information floor (2-D, true shading, no noise)",
                    fmt(r["floor"]["rmse_mean"]), *colour_cells(r["floor"]["colour"]))  # fmt: skip
+        for method, b in (
+            ("reconstruction", r["brightness"]),
+            ("oracle", r["oracle_brightness"]),
+            ("information floor", r["floor"]["brightness"]),
+        ):
+            band = f"{b['band_first_nm']:.0f}–{b['band_last_nm']:.0f} nm"
+            bright.add(r["scene"], method, f"{b['all']:.3f}", f"{b['in_band']:.3f} ({band})",
+                       f"{b['out_of_band']:.3f}")  # fmt: skip
         stages = ", ".join(f"{k} {v:.0f}" for k, v in r["timings_s"].items())
         cost.add(r["scene"], f"{r['render_s']:.0f}", stages, f"{r['peak_rss_mb']:.0f}")
-    return [shape, spectral, colour, cost]
+    return [shape, spectral, colour, bright, cost]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -4,17 +4,21 @@ stage reads back as the composed image."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.ndimage import minimum_filter
 
 pytest.importorskip("mitsuba")
 
-from bench._common import information_floor
+from bench._common import brightness, information_floor
+from bench.external import reflectance_brightness
 from bench.external_render import ShadingRenderer, compose
 from bench.external_scene import SceneSpec
-from bench.external_session import Size, build_session
+from bench.external_session import ExternalCamera, Size, build_session
+from bench.paper_sim import _write_npz
 from reconstruct.frames import decode
 from reconstruct.frames.decode import decode_raw
 from reconstruct.model.camera import Intrinsics, Pose, project
@@ -83,7 +87,41 @@ def test_indicator_renders_sum_to_the_white_render(
     np.testing.assert_allclose(composed[..., 2], 0.5 * white, rtol=1e-3, atol=1e-6)
 
 
-def test_tiny_session_decodes_to_the_composed_image(shared_data: Path, tmp_path: Path) -> None:
+def test_curved_object_matches_the_project_renderer() -> None:
+    """Radiometry, pixel by pixel: Mitsuba's image of a lit sphere is the project's own
+    render (cos term, inverse square, smooth normals, pixel footprint) at several distances
+    and light angles, so no brightness bias enters between the renderer and the model."""
+    import trimesh
+
+    from reconstruct.model import render
+    from reconstruct.model.raycast import RayCaster
+
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.05)
+    vertices, faces = np.asarray(sphere.vertices), np.asarray(sphere.faces, dtype=np.int64)
+    intr = Intrinsics.pinhole(64, 48, 80.0)
+    renderer = ShadingRenderer(vertices, faces, np.zeros(len(vertices), np.int64), intr, spp=256)
+    caster, normals = RayCaster(vertices, faces), render.vertex_normals(vertices, faces)
+    white = np.ones((len(vertices), 3))
+    for distance, light_offset in ((0.25, (0.1, 0.0, 0.0)), (0.5, (-0.05, 0.2, 0.0))):
+        pose = Pose.look_at(np.array([0.0, -distance, 0.05]), np.zeros(3))
+        light = pose.light_position(np.array(light_offset))
+        mitsuba_image = renderer.render_white(pose, light)
+        hits = render.trace_view(caster, intr, pose, 4, "smooth", normals)
+        weight = render.light_weight(caster, hits, light)
+        ours = render.shade_vertex_rgb(hits, [(weight, white)])[..., 0]
+        # whole pixels on the sphere, away from the silhouette and the shadow terminator
+        inside = (hits.coverage() > 0.999) & (ours > 0.2 * ours.max())
+        assert inside.sum() > 100
+        ratio = mitsuba_image[inside] / ours[inside]
+        assert abs(np.median(ratio) - 1.0) < 0.003
+        assert np.percentile(ratio, 5) > 0.98 and np.percentile(ratio, 95) < 1.02
+
+
+def test_tiny_session_decodes_to_the_composed_image(
+    shared_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from reconstruct.outputs.evaluate import load_mesh
+
     spec = SceneSpec(
         "smoke",
         "spot.obj",
@@ -93,6 +131,15 @@ def test_tiny_session_decodes_to_the_composed_image(shared_data: Path, tmp_path:
         (30.0,),
     )
     size = Size(width=64, height=48, focal_px=112.0, views=4, spp=16, ambient=0.05)
+    composed: dict[tuple[int, str | None], np.ndarray] = {}
+    render_linear = ExternalCamera.render_linear
+
+    def recording(camera: ExternalCamera) -> np.ndarray:
+        image = render_linear(camera)
+        composed[(camera.rig.view, camera.light.illumination)] = image
+        return image
+
+    monkeypatch.setattr(ExternalCamera, "render_linear", recording)
     session = build_session(spec, size, tmp_path, shared_data, tmp_path / "cache")
     raws = sorted((session / "raw").glob("*.dng"))
     assert len(raws) == 4 * 3  # ambient + two lamps per view
@@ -104,9 +151,34 @@ def test_tiny_session_decodes_to_the_composed_image(shared_data: Path, tmp_path:
     assert lit.mean() > 5 * amb.mean() > 0  # the bulb dominates, the ambient is there
     decoded = decode.run({}, session, tmp_path / "decoded")  # rig reconstruct's decode stage
     assert len(sorted(Path(decoded).glob("frame_*_sat.npy"))) == 12
+    # radiometry through the DNG, black/white levels, exposure and demosaic: the decoded frame
+    # is the composed linear image (shot and read noise aside), in every channel
+    index = json.loads((Path(decoded) / "index.json").read_text())
+    ratios = []
+    for frame in index["frames"]:
+        if frame["illumination"] == "ambient":
+            continue  # a Monte Carlo sky at 16 spp: pixel noise that demosaicking averages
+        image = np.load(Path(decoded) / frame["image"]).astype(float)
+        truth = composed[(frame["view"], frame["illumination"])]
+        # off the silhouette and dark paint, where demosaicking mixes neighbours
+        interior = minimum_filter(truth.min(axis=2), 5) > 0.1 * truth.max()
+        ratios.append(image[interior] / truth[interior])
+    pooled = np.concatenate(ratios)
+    assert len(pooled) > 200
+    np.testing.assert_allclose(np.median(pooled, axis=0), 1.0, atol=0.005)
     # the information floor of the session's two lamps and camera, per vertex and per patch
     floor = information_floor(session)
     assert 0 < floor["rmse_mean"] < 0.2
+    # what the camera sees the noise-free estimator reproduces; the rest is its prior's
+    assert abs(floor["brightness"]["in_band"] - 1.0) < 0.02
+    assert 400 < floor["brightness"]["band_first_nm"] < floor["brightness"]["band_last_nm"] < 700
+    # a reflectance.npz on the true mesh: half the vertices 10 % bright, the other half unseen
+    gt = session / "ground_truth"
+    mesh = load_mesh(gt / "mesh.ply")
+    seen = np.arange(len(mesh.vertices)) % 2 == 0
+    npz = _write_npz(tmp_path / "r.npz", np.asarray(mesh.vertices), np.asarray(mesh.faces),
+                     1.1 * np.load(gt / "reflectance.npy"), seen)  # fmt: skip
+    assert reflectance_brightness(npz, session)["all"] == pytest.approx(1.1)
     d65 = floor["colour"][0]
     assert d65["illuminant"] == "D65" and 0 < d65["per_vertex"]["mean"] < 10
     assert len(d65["patches"]) > 1 and d65["patch_max"] >= d65["patch_mean"] > 0
@@ -128,3 +200,19 @@ def test_coarse_meshes_are_subdivided_to_a_smooth_scored_surface(tmp_path: Path)
     assert np.degrees(mesh.face_adjacency_angles.mean()) < 8
     fine = load_mesh(path, 0.2, max_edge_m=1.0)  # already fine enough: left as it is
     assert len(fine.faces) == 80
+
+
+def test_brightness_splits_the_band_the_camera_sees_from_the_prior() -> None:
+    wavelengths = np.arange(400.0, 701.0, 10.0)
+    responses = np.zeros((2, 3, len(wavelengths)))
+    responses[:, :, 5:25] = 1.0  # 450–640 nm seen
+    truth = np.tile(np.linspace(0.2, 0.6, len(wavelengths)), (4, 1))
+    estimate = truth.copy()
+    estimate[:, :5] *= 1.3
+    estimate[:, 25:] *= 1.3
+    estimate[0] = np.nan  # unobserved vertices are left out
+    b = brightness(estimate, truth, responses, wavelengths)
+    assert b["in_band"] == pytest.approx(1.0)
+    assert b["out_of_band"] == pytest.approx(1.3)
+    assert 1.0 < b["all"] < 1.3
+    assert (b["band_first_nm"], b["band_last_nm"]) == (450.0, 640.0)
