@@ -6,6 +6,7 @@ initial mesh) and scored against the truth and against a per-vertex least-square
     python -m bench.external --size smoke            # one tiny scene (seconds of rendering)
     python -m bench.external --size full             # 3 scenes, 800x600, 40 views
     python -m bench.external --size medium --scenes spot-stepped
+    python -m bench.external --size medium --optics real   # 6 cm bulb, 4 % gloss, cos⁴
 
 Per scene: initial and final accuracy/completeness (mean, median, p90), spectral RMSE (mean,
 median, per ColorChecker patch), CIEDE2000 under D65 and A (per vertex mean/median/p90, per
@@ -38,6 +39,7 @@ from bench._common import (
     peak_rss_mb,
     report,
 )
+from bench.external_optics import PRESETS
 from bench.external_scene import DATA, SceneSpec
 from bench.external_session import Size, build_session
 from calibration.defaults import colorchecker_reflectances
@@ -297,6 +299,13 @@ def main(argv: list[str] | None = None) -> int:
         help="optimiser iterations: rig reconstruct's default, rig demo's, or smoke "
         "(default: smoke for --size smoke, else default)",
     )
+    p.add_argument(
+        "--optics",
+        choices=tuple(PRESETS),
+        default="ideal",
+        help="real optics rendered by Mitsuba: a 6 cm bulb, a 4 %% GGX gloss (alpha 0.2), "
+        "cos^4 fall-off, a strong lens's fall-off, or all together (real, real-lens)",
+    )
     p.add_argument("--config", type=Path, default=None,
                    help="a reconstruction config (YAML) merged over the budget, e.g. "
                    "mesh: {method: patchmatch}")
@@ -305,6 +314,9 @@ def main(argv: list[str] | None = None) -> int:
     if a.ambient:
         size = replace(size, ambient=a.ambient, ambient_frames=not a.no_ambient_frames)
         folder += f"-ambient{a.ambient:g}" + ("-unsubtracted" if a.no_ambient_frames else "")
+    if a.optics != "ideal":
+        size = replace(size, optics=PRESETS[a.optics])
+        folder += f"-optics-{a.optics}"
     names = a.scenes or (SMOKE_SCENES if a.size == "smoke" else tuple(SCENES))
     out = a.out / folder
     out.mkdir(parents=True, exist_ok=True)
@@ -321,11 +333,12 @@ def main(argv: list[str] | None = None) -> int:
         "external",
         out,
         tables(results),
-        {"size": a.size, "results": results},
+        {"size": a.size, "optics": a.optics, "results": results},
         machine_info(),
         notes=[
             f"{a.size}: {size.width}x{size.height}, {size.views} views, {size.spp} spp, "
-            f"ambient {size.ambient} (frames {size.ambient_frames}), optimiser budget {budget}, "
+            f"ambient {size.ambient} (frames {size.ambient_frames}), optics {a.optics} "
+            f"({size.optics}), optimiser budget {budget}, "
             f"config {a.config}; error maps under {out}/SCENE/"
         ],
     )

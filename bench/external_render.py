@@ -12,6 +12,10 @@ radiometric scale of the project's own model, computed here by a different rende
 BVH, shadow rays, smooth normals and box-filtered pixel sampling). Renders are cached on disk
 (compressed float16), keyed by everything that changes them, so several lamps, cameras and
 noise seeds reuse one set.
+
+Real optics (``bench.external_optics``): the point light becomes a sphere emitter with the
+same power, and a neutral GGX lobe adds one more image, the *specular* shading (rendered with
+the lobe alone, white), returned after the patches' and composed with a white reflectance.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.external_optics import IDEAL, Optics, sphere_radiance
 from core.errors import RigError
 from core.install import install_command
 from reconstruct.model.camera import Intrinsics, Pose
@@ -99,6 +104,7 @@ class ShadingRenderer:
         spp: int = 16,
         cache: Path | None = None,
         variant: str | None = None,
+        optics: Optics = IDEAL,
     ) -> None:
         self.mi = mi = mitsuba(variant)
         self.n_patches = int(patch.max()) + 1
@@ -106,6 +112,7 @@ class ShadingRenderer:
         self.intrinsics = intrinsics
         self.spp = int(spp)
         self.cache = cache
+        self.optics = optics
         fx, fy, cx, cy = (float(p) for p in intrinsics.K[[0, 1, 0, 1], [0, 1, 2, 2]])
         if (
             abs(fx - fy) > 1e-9
@@ -120,21 +127,24 @@ class ShadingRenderer:
                 for a in (vertices.astype(np.float64), faces.astype(np.int64), self.patch)
             )
             + f"{intrinsics.width}x{intrinsics.height}f{fx}s{spp}{mi.variant()}".encode()
+            + optics.render_key().encode()
         ).hexdigest()[:16]
-        props = mi.Properties()
-        props["bsdf"] = mi.load_dict(
-            {"type": "diffuse", "reflectance": {"type": "mesh_attribute", "name": "vertex_color"}}
-        )
-        mesh = mi.Mesh("object", len(vertices), len(faces), props=props, has_vertex_normals=True)
-        mesh.add_attribute("vertex_color", 3, np.zeros(3 * len(vertices), dtype=np.float32))
-        params = mi.traverse(mesh)
-        params["vertex_positions"] = np.ravel(vertices).astype(np.float32)
-        params["faces"] = np.ravel(faces).astype(np.uint32)
-        # smooth shading normals computed here: Mitsuba's own normal kernel needs an LLVM
-        # newer than 15 on x86, and the project's sim shades with area-weighted normals too
-        params["vertex_normals"] = np.ravel(vertex_normals(vertices, faces)).astype(np.float32)
-        params.update()
-        self._mesh = mesh
+        diffuse = {
+            "type": "diffuse",
+            "reflectance": {"type": "mesh_attribute", "name": "vertex_color"},
+        }
+        self._meshes = {False: self._mesh(vertices, faces, diffuse)}
+        if optics.gloss_reflectance > 0:
+            # the lobe alone, Fresnel of a dielectric (k = 0): added to the diffuse shading,
+            # which stays the true albedo (roughplastic cannot take a per-vertex albedo)
+            lobe = {
+                "type": "roughconductor",
+                "distribution": "ggx",
+                "alpha": optics.gloss_alpha,
+                "eta": optics.gloss_ior,
+                "k": 0.0,
+            }
+            self._meshes[True] = self._mesh(vertices, faces, lobe)
         fov = float(np.degrees(2.0 * np.arctan(intrinsics.width / (2.0 * fx))))
         self._base = {
             "type": "scene",
@@ -154,33 +164,71 @@ class ShadingRenderer:
                 },
                 "sampler": {"type": "independent", "sample_count": self.spp},
             },
-            "object": mesh,
         }
-        self._scenes: dict[str, Any] = {}
+        self._scenes: dict[tuple[str, bool], Any] = {}
 
-    def _scene(self, kind: str) -> Any:
-        """The scene with a point light (``lit``) or a uniform white environment (``ambient``)."""
-        if kind not in self._scenes:
-            mi = self.mi
+    def _mesh(self, vertices: np.ndarray, faces: np.ndarray, bsdf: dict[str, Any]) -> Any:
+        """The object as a Mitsuba mesh with ``bsdf`` and a (zero) vertex colour attribute."""
+        mi = self.mi
+        props = mi.Properties()
+        props["bsdf"] = mi.load_dict(bsdf)
+        mesh = mi.Mesh("object", len(vertices), len(faces), props=props, has_vertex_normals=True)
+        mesh.add_attribute("vertex_color", 3, np.zeros(3 * len(vertices), dtype=np.float32))
+        params = mi.traverse(mesh)
+        params["vertex_positions"] = np.ravel(vertices).astype(np.float32)
+        params["faces"] = np.ravel(faces).astype(np.uint32)
+        # smooth shading normals computed here: Mitsuba's own normal kernel needs an LLVM
+        # newer than 15 on x86, and the project's sim shades with area-weighted normals too
+        params["vertex_normals"] = np.ravel(vertex_normals(vertices, faces)).astype(np.float32)
+        params.update()
+        return mesh
+
+    def _light(self) -> dict[str, Any]:
+        """The bulb: a point light of intensity π, or a sphere emitter of the same power."""
+        radius = self.optics.bulb_radius_m
+        if radius <= 0:
+            return {
+                "type": "point",
+                "position": [0.0, 0.0, 1.0],
+                "intensity": {"type": "rgb", "value": [np.pi] * 3},
+            }
+        radiance = sphere_radiance(np.pi, radius)
+        return {
+            "type": "sphere",
+            "center": [0.0, 0.0, 1.0],
+            "radius": radius,
+            "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [radiance] * 3}},
+        }
+
+    def _scene(self, kind: str, gloss: bool) -> Any:
+        """The scene with the bulb (``lit``) or a uniform white environment (``ambient``),
+        the object diffuse or (``gloss``) its specular lobe alone."""
+        if (kind, gloss) not in self._scenes:
             emitter = (
-                {
-                    "type": "point",
-                    "position": [0.0, 0.0, 1.0],
-                    "intensity": {"type": "rgb", "value": [np.pi] * 3},
-                }
+                self._light()
                 if kind == "lit"
                 else {"type": "constant", "radiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}
             )
-            self._scenes[kind] = mi.load_dict({**self._base, "emitter": emitter})
-        return self._scenes[kind]
+            self._scenes[kind, gloss] = self.mi.load_dict(
+                {**self._base, "object": self._meshes[gloss], "emitter": emitter}
+            )
+        return self._scenes[kind, gloss]
 
-    def _posed(self, pose: Pose, light_position: np.ndarray | None) -> tuple[Any, Any]:
+    def _posed(
+        self, pose: Pose, light_position: np.ndarray | None, gloss: bool = False
+    ) -> tuple[Any, Any]:
         """The lit (or ambient) scene and its parameters with camera and light placed."""
-        scene = self._scene("ambient" if light_position is None else "lit")
+        scene = self._scene("ambient" if light_position is None else "lit", gloss)
         params = self.mi.traverse(scene)
         params["sensor.to_world"] = _to_world(self.mi, pose)
         if light_position is not None:
-            params["emitter.position"] = [float(x) for x in light_position]
+            position = [float(x) for x in light_position]
+            if self.optics.bulb_radius_m > 0:
+                params["emitter.to_world"] = (
+                    self.mi.ScalarTransform4f().translate(position).scale(self.optics.bulb_radius_m)
+                )
+            else:
+                params["emitter.position"] = position
         return scene, params
 
     def _indicators(self, chunk: int) -> np.ndarray:
@@ -190,10 +238,16 @@ class ShadingRenderer:
             col[self.patch == 3 * chunk + c, c] = 1.0
         return col
 
+    @property
+    def n_images(self) -> int:
+        """Shading images per render: one per patch, and the specular one with gloss."""
+        return self.n_patches + int(self.optics.gloss_reflectance > 0)
+
     def render(self, pose: Pose, light_position: np.ndarray | None) -> np.ndarray:
-        """Shading of every patch, (n_patches, H, W) float32: under the point light at
-        ``light_position`` (world, metres), or, with None, under a uniform unit-radiance
-        environment (ambient light, occlusion included)."""
+        """Shading of every patch (and, with gloss, the specular shading last),
+        (n_images, H, W) float32: under the bulb at ``light_position`` (world, metres), or,
+        with None, under a uniform unit-radiance environment (ambient light, occlusion
+        included)."""
         key = hashlib.sha1(
             np.ascontiguousarray(np.concatenate([pose.R.ravel(), pose.t])).tobytes()
             + (
@@ -213,8 +267,14 @@ class ShadingRenderer:
             params.update()
             img = np.asarray(self.mi.render(scene, spp=self.spp, seed=j), dtype=np.float32)
             out[3 * j : 3 * j + 3] = np.moveaxis(img, 2, 0)
+        out = out[: self.n_patches]
+        if self.optics.gloss_reflectance > 0:
+            scene, params = self._posed(pose, light_position, gloss=True)
+            params.update()
+            img = np.asarray(self.mi.render(scene, spp=self.spp, seed=chunks), dtype=np.float32)
+            out = np.concatenate([out, img[None, ..., 0]])
         # what the cache keeps, so a first run and a run from the cache capture the same frames
-        out = out[: self.n_patches].astype(np.float16).astype(np.float32)
+        out = out.astype(np.float16).astype(np.float32)
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
             tmp = path.with_suffix(".tmp.npz")

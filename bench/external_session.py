@@ -5,7 +5,8 @@ plate, manifest, calibration snapshot, ground truth, true poses in ``poses/``); 
 camera is swapped for :class:`ExternalCamera`, which composes Mitsuba's per-patch shading
 images with the measured lamp and camera spectra and hands the linear image to the sim
 camera's own exposure (shot + read noise, clipping, Bayer mosaic) and DNG writer. So
-``rig reconstruct SESSION`` reads it exactly like a capture.
+``rig reconstruct SESSION`` reads it exactly like a capture. Real optics (``Size.optics``):
+the renderer's bulb and gloss, and lens fall-off as a gain on the linear image before exposure.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 import yaml
 from rich.console import Console
 
+from bench.external_optics import IDEAL, Optics, falloff_gain
 from bench.external_render import ShadingRenderer, compose
 from bench.external_scene import SceneSpec, camera_ssf, lamp_spd, load_mesh, painted_scene
 from calibration.grid import DEFAULT_GRID
@@ -49,6 +51,7 @@ class Size:
     spp: int = 16
     ambient: float = 0.0  # ambient level relative to the bulb (0: no room light)
     ambient_frames: bool = True  # with a room light: capture an ambient frame per view
+    optics: Optics = IDEAL  # real-optics effects (default: ideal optics)
 
 
 class ExternalCamera(SimCamera):
@@ -71,10 +74,15 @@ class ExternalCamera(SimCamera):
         self.rig = rig
         self.renderer = renderer
         _, chart = _chart()
+        chart = chart[: renderer.n_patches]
+        if renderer.n_images > renderer.n_patches:  # the specular shading: neutral, white
+            chart = np.vstack([chart, np.ones(chart.shape[1])])
         self._patch_rgb = {
             name: chart @ forward.response_matrix(ssf, spd).T for name, spd in lamps.items()
         }
         self._ambient = None if ambient is None else chart @ forward.response_matrix(ssf, ambient).T
+        optics = renderer.optics
+        self._gain = falloff_gain(renderer.intrinsics, optics) if optics.has_falloff else None
 
     def render_linear(self) -> np.ndarray:
         """Σ_k shading_k · Cᵀ diag(L) ρ_k for the lamp now on (and the ambient light)."""
@@ -92,6 +100,8 @@ class ExternalCamera(SimCamera):
             raise RigError("external camera: set the light by illumination name")
         if self._ambient is not None:
             image += compose(self.renderer.render(pose, None), self._ambient)
+        if self._gain is not None:  # lens fall-off: the sensor-side effect, after rendering
+            image *= self._gain[..., None]
         return image
 
 
@@ -190,7 +200,13 @@ def build_session(
         if sim is None:
             raise RigError(f"{profile}: the external camera needs the sim rig (driver: sim)")
         renderer = ShadingRenderer(
-            sim.scene.vertices, sim.scene.faces, sim.scene.patch, sim.intrinsics, size.spp, cache
+            sim.scene.vertices,
+            sim.scene.faces,
+            sim.scene.patch,
+            sim.intrinsics,
+            size.spp,
+            cache,
+            optics=size.optics,
         )
         devices.camera.close()
         devices.camera = ExternalCamera(
