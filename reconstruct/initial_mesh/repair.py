@@ -263,7 +263,8 @@ def repair(
                                  "boundary edges closed)")
     if not now.subdividable:
         out = drop_non_manifold(out, conf, report)
-    left = defects(out)
+        now = defects(out)
+    left = now
     report["result"] = asdict(left)
     if hull is not None and voxel:
         distance = hull_distance(out, hull)

@@ -46,3 +46,15 @@ def set_light(devices: RigDevices, profile: Profile, name: str | None) -> None:
             light.off()
         else:
             light.set_levels(profile.illuminations[name])
+
+
+def halve_exposure(camera: object, exposure_s: float, what: str) -> None:
+    """Halve the exposure after a saturated ``what``, or say how to when the camera's exposure
+    is not set from here."""
+    setter = getattr(camera, "set_exposure", None)
+    if setter is None:
+        raise RigError(
+            f"the {what} is saturated",
+            "shorten the exposure (camera_settings.exposure_s) and run again",
+        )
+    setter(exposure_s / 2)

@@ -24,7 +24,7 @@ from core.errors import RigError
 from drivers.protocols import Camera
 from rig.capture.devices import RigDevices, device_errors
 from rig.profile import Profile
-from rig.wizard.common import Ask, set_light, step, today
+from rig.wizard.common import Ask, halve_exposure, set_light, step, today
 
 SATURATION_RETRIES = 5
 DEMOSAIC = "linear"  # the fit averages blocks of pixels: the demosaic's detail is moot
@@ -101,13 +101,7 @@ class _Shooter:
             if ok[h // 4 : 3 * h // 4, w // 4 : 3 * w // 4].all():
                 switch(None)
                 return Path(lit.paths[0]), Path(self._shoot().paths[0])
-            setter = getattr(self.camera, "set_exposure", None)
-            if setter is None:
-                raise RigError(
-                    "the white card is saturated",
-                    "shorten the exposure (camera_settings.exposure_s) and run again",
-                )
-            setter(lit.exposure_s / 2)
+            halve_exposure(self.camera, lit.exposure_s, "white card")
         raise RigError("the white card stays saturated", "move the card further from the light")
 
     def _shoot(self) -> Any:

@@ -16,7 +16,7 @@ from core.errors import RigError
 from drivers.protocols import Camera
 from rig.capture.devices import RigDevices, device_errors
 from rig.profile import Profile
-from rig.wizard.common import Ask, set_light
+from rig.wizard.common import Ask, halve_exposure, set_light
 from rig.wizard.reference_raw import region_rgb
 
 SATURATION_RETRIES = 5
@@ -54,13 +54,7 @@ class Reference:
             rgb, saturated = region_rgb(Path(frame.paths[0]), self.region)
             if not saturated:
                 return rgb / (frame.exposure_s * frame.iso / 100.0)
-            setter = getattr(self.camera, "set_exposure", None)
-            if setter is None:
-                raise RigError(
-                    "the white reference is saturated",
-                    "shorten the exposure (camera_settings.exposure_s) and run again",
-                )
-            setter(frame.exposure_s / 2)
+            halve_exposure(self.camera, frame.exposure_s, "white reference")
         raise RigError("the white reference stays saturated", "move the light further away")
 
     def photograph(self, illumination: str) -> np.ndarray:
