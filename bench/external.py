@@ -198,6 +198,7 @@ def run_scene(
         "rmse_mean": final["rmse_mean"],
         "rmse_median": final["rmse_median"],
         "rmse_per_patch": per_patch_rmse(rec.reflectance_path, final_dir, truth),
+        "outside_unit_range": final["outside_unit_range"],
         "oracle_rmse_mean": oracle["rmse_mean"],
         "oracle_rmse_median": oracle["rmse_median"],
         "colour": final["colour"],
@@ -233,7 +234,7 @@ def tables(results: list[dict[str, Any]]) -> list[ResultTable]:
     spectral = ResultTable(
         "Spectra and light",
         ["scene", "RMSE mean", "RMSE median", "oracle RMSE mean", "worst patch (RMSE)",
-         "light offset error (mm)"],
+         "samples outside [0, 1]", "light offset error (mm)"],
     )  # fmt: skip
     colour = ResultTable(
         "Colour: spectral RMSE and CIEDE2000 (CIE 1931 2°) against the truth",
@@ -258,7 +259,8 @@ def tables(results: list[dict[str, Any]]) -> list[ResultTable]:
         name = colorchecker_reflectances()[0][int(worst[0])]
         spectral.add(
             r["scene"], fmt(r["rmse_mean"]), fmt(r["rmse_median"]), fmt(r["oracle_rmse_mean"]),
-            f"{name} ({worst[1]:.3f})", _mm(r["light_offset_error_m"]),
+            f"{name} ({worst[1]:.3f})", str(r.get("outside_unit_range", "-")),
+            _mm(r["light_offset_error_m"]),
         )  # fmt: skip
         colour.add(r["scene"], "reconstruction", fmt(r["rmse_mean"]), *colour_cells(r["colour"]))
         colour.add(r["scene"], "oracle (true shape and light, per vertex)",

@@ -163,6 +163,7 @@ def _score(
         "rmse_mean": ev.spectral_rmse,
         "rmse_median": float(np.median(rmse[observed.astype(bool)])),
         "colour": ev.colour,
+        "outside_unit_range": ev.outside_unit_range,
         "light_offset_error_m": ev.light_offset_error_m,
         "light_position_error_m": light_err,
         "vertices": ev.vertices,

@@ -10,6 +10,9 @@ where D is the second-difference operator (paper eq. 8). λ is *relative*:
 whatever the units of the light and the exposure. Without per-pixel weights the normal equations
 are solved once and applied to every pixel as one (N_b × 3K) matrix; with per-pixel shading or
 missing (NaN) values each pixel gets its own small N_b × N_b system, solved in batches.
+Every estimate is physically valid: with ``bounds`` (default ``(0, 1)``) the same quadratic is
+minimised subject to ``0 ≤ B α ≤ 1`` at every wavelength (:mod:`calibration.bounds`) wherever its
+unconstrained minimiser leaves them.
 This is the paper's "MVS + per-pixel estimation" baseline and the optimiser's initial guess.
 """
 
@@ -18,12 +21,15 @@ from __future__ import annotations
 import numpy as np
 
 from calibration.basis import SpectralBasis
+from calibration.bounds import bounded_quadratic
 from calibration.spectra import second_difference_matrix
 from core.errors import RigError
 
 DEFAULT_SMOOTHNESS = 0.1
 """Relative weight; robust with ~1 % camera noise (see calibration.selection for tuning)."""
 BATCH = 65536
+Bounds = tuple[float, float] | None
+REFLECTANCE_BOUNDS: Bounds = (0.0, 1.0)
 
 
 def response_matrices(camera: np.ndarray, spds: list[np.ndarray] | np.ndarray) -> np.ndarray:
@@ -60,15 +66,24 @@ def smoothness_gram(basis: SpectralBasis) -> np.ndarray:
     return db.T @ db
 
 
-def estimation_matrix(
+def normal_equations(
     resp: np.ndarray, basis: SpectralBasis, smoothness: float = DEFAULT_SMOOTHNESS
-) -> np.ndarray:
-    """The linear estimator W (N_b, 3K): ``α = W y`` with y the K RGB triples stacked."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """The estimator's quadratic for unit shading: ``(lhs (N_b, N_b), m (3K, N_b))``, minimised
+    by ``lhs α = mᵀ y`` with y the K RGB triples stacked."""
     m = (resp @ basis.B).reshape(-1, basis.n_components)  # (3K, N_b)
     gram = m.T @ m
     smooth = smoothness_gram(basis)
     lam = smoothness * np.trace(gram) / np.trace(smooth)
-    lhs = gram + lam * smooth + 1e-12 * np.trace(gram) * np.eye(gram.shape[0])
+    return gram + lam * smooth + 1e-12 * np.trace(gram) * np.eye(gram.shape[0]), m
+
+
+def estimation_matrix(
+    resp: np.ndarray, basis: SpectralBasis, smoothness: float = DEFAULT_SMOOTHNESS
+) -> np.ndarray:
+    """The linear (unbounded) estimator W (N_b, 3K): ``α = W y`` with y the K RGB triples
+    stacked."""
+    lhs, m = normal_equations(resp, basis, smoothness)
     return np.linalg.solve(lhs, m.T)
 
 
@@ -80,6 +95,7 @@ def estimate_reflectance(
     *,
     fit_scale: bool = False,
     shading: np.ndarray | None = None,
+    bounds: Bounds = REFLECTANCE_BOUNDS,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Reflectance per pixel from ``rgb`` (P, K, 3) under ``responses`` (K, 3, N_λ), the
     matrices :func:`response_matrices` builds.
@@ -88,7 +104,9 @@ def estimate_reflectance(
     (0 = not observed). NaN entries in ``rgb`` are missing values (saturated/masked) and are
     ignored. Pixels with no usable observation get NaN. With ``fit_scale`` the overall scale is
     treated as unknown (unknown shading or exposure) and each reflectance is normalised to a
-    maximum of 1. Returns ``(alpha (P, N_b), reflectance (P, N_λ))``.
+    maximum of 1 (only the lower bound applies then). ``bounds``: the reflectance's
+    ``(lower, upper)`` (an infinite upper bound where the scale is unknown), or None for the
+    unbounded linear estimate. Returns ``(alpha (P, N_b), reflectance (P, N_λ))``.
     """
     y = np.asarray(rgb, dtype=float)
     resp = np.asarray(responses, dtype=float)
@@ -98,12 +116,17 @@ def estimate_reflectance(
             f"smoothness {smoothness:g} is negative or NaN",
             f"use 0 (none) or a positive relative weight (default {DEFAULT_SMOOTHNESS})",
         )
+    if bounds is not None and fit_scale:
+        bounds = (bounds[0], np.inf)
     missing = ~np.isfinite(y)
     if shading is None and not missing.any():
-        w = estimation_matrix(resp, basis, smoothness)
-        alpha = y.reshape(y.shape[0], -1) @ w.T
+        lhs, m = normal_equations(resp, basis, smoothness)
+        rhs = y.reshape(y.shape[0], -1) @ m
+        alpha = np.linalg.solve(lhs, rhs.T).T
+        if bounds is not None:
+            alpha = bounded_quadratic(lhs, rhs, basis.B, *bounds, unconstrained=alpha)
     else:
-        alpha = _estimate_weighted(y, resp, basis, smoothness, shading, missing)
+        alpha = _estimate_weighted(y, resp, basis, smoothness, shading, missing, bounds)
     if fit_scale:
         refl = basis.reconstruct(alpha)
         scale = np.max(refl, axis=1, keepdims=True)
@@ -119,6 +142,7 @@ def _estimate_weighted(
     smoothness: float,
     shading: np.ndarray | None,
     missing: np.ndarray,
+    bounds: Bounds,
 ) -> np.ndarray:
     """Per-pixel normal equations (P small N_b × N_b systems), solved in batches."""
     p, k, _ = y.shape
@@ -148,6 +172,8 @@ def _estimate_weighted(
         lhs = gram + lam[:, None, None] * smooth + (1e-12 * tr)[:, None, None] * np.eye(nb)
         lhs[~ok] = np.eye(nb)
         sol = np.linalg.solve(lhs, rhs[..., None])[..., 0]
+        if bounds is not None:
+            sol = bounded_quadratic(lhs, rhs, basis.B, *bounds, unconstrained=sol)
         sol[~ok] = np.nan
         alpha[sl] = sol
     return alpha

@@ -104,11 +104,15 @@ def build_problem(
 
 
 def initial_reflectance(
-    problem: Problem, theta: np.ndarray, basis: SpectralBasis, smoothness: float
+    problem: Problem,
+    theta: np.ndarray,
+    basis: SpectralBasis,
+    smoothness: float,
+    upper: float = 1.0,
 ) -> np.ndarray:
     """α from the calibration module's 2-D estimate, per vertex, with the current shading:
     each (vertex, illumination)'s observations are pooled by least squares into one RGB and a
-    shading weight; vertices never observed get the mean α."""
+    shading weight; vertices never observed get the mean α. Reflectance within [0, ``upper``]."""
     cost = JointCost(problem)
     X, A, light = problem.unpack(theta)
     normals, _ = vertex_normals(X, problem.faces)
@@ -129,7 +133,8 @@ def initial_reflectance(
     rows = np.flatnonzero(seen.any(axis=1))
     if rows.size:
         alpha[rows], _ = estimate_reflectance(
-            rgb[rows], problem.rig.responses, basis, smoothness, shading=root[rows]
+            rgb[rows], problem.rig.responses, basis, smoothness, shading=root[rows],
+            bounds=(0.0, upper),
         )
     good = np.all(np.isfinite(alpha), axis=1)
     fill = alpha[good].mean(axis=0) if good.any() else basis.project(np.full(basis.B.shape[0], 0.5))

@@ -93,7 +93,9 @@ class OptimiseInput:
 
     ``visibility`` (N, N_views) bool: V(i) per view. Observed colours come from
     ``frames.images`` (sampled at the projections) or, without images, from ``observed``
-    (N, F, 3), NaN where not observed.
+    (N, F, 3), NaN where not observed. ``reflectance_upper``: the reflectance's upper bound,
+    1 where its scale is absolute, inf where the poses have no metric scale (the reflectance is
+    then known only up to a factor); its lower bound is always 0.
     """
 
     vertices: np.ndarray
@@ -105,3 +107,4 @@ class OptimiseInput:
     observed: np.ndarray | None = None
     initial_light: np.ndarray | None = None
     initial_alpha: np.ndarray | None = None
+    reflectance_upper: float = 1.0

@@ -4,6 +4,13 @@ Each iteration solves ``(JᵀJ + λ D) δ = −Jᵀr`` (D = diag JᵀJ, Marquard
 the factored JᵀJ of :class:`~reconstruct.optimise.cost.Linearisation`, preconditioned by the
 exact diagonal blocks (per vertex [x, α], per light 3×3) — never forming J. Steps are accepted by
 the gain ratio and λ follows Nielsen's update. Parameters outside a stage's mask stay fixed.
+
+With reflectance bounds (projected Levenberg–Marquardt): a vertex whose spectrum ``B α`` sits
+on a bound that the descent direction pushes through moves only along that face (its α
+directions are projected in the CG solve), and a trial step that still takes a spectrum out
+is projected back in the metric of the vertex's damped α block — the minimiser of the
+vertex's own quadratic model within the bounds, which a Euclidean projection is not where the
+data constrain some basis directions far more than others.
 """
 
 from __future__ import annotations
@@ -20,6 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
+from calibration.bounds import bounded_quadratic
 from core.config import bounded
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.kernels.cg import cg_direction, cg_step, project_to_stage
@@ -35,6 +43,7 @@ from reconstruct.optimise.linearisation import Linearisation
 
 _NO_DIRECTIONS = np.empty((0, 3))  # free motion
 _NO_DAMPING = np.empty(0)
+_AT_BOUND = 1e-6  # a sample this close to a reflectance bound is on it (ε-active)
 
 
 @dataclass
@@ -244,6 +253,7 @@ def levenberg_marquardt(
     callback: Callback | None = None,
     directions: np.ndarray | None = None,
     constrain: Callable[[np.ndarray], np.ndarray] | None = None,
+    reflectance_bounds: tuple[float, float] | None = None,
 ) -> SolveResult:
     """:func:`_levenberg_marquardt` with BLAS held to one thread and freed memory kept.
 
@@ -252,7 +262,9 @@ def levenberg_marquardt(
     :func:`keep_freed_memory`.
     """
     with threadpool_limits(limits=1, user_api="blas"), keep_freed_memory():
-        return _levenberg_marquardt(cost, theta, mask, settings, callback, directions, constrain)
+        return _levenberg_marquardt(
+            cost, theta, mask, settings, callback, directions, constrain, reflectance_bounds
+        )
 
 
 def _levenberg_marquardt(
@@ -263,6 +275,7 @@ def _levenberg_marquardt(
     callback: Callback | None,
     directions: np.ndarray | None,
     constrain: Callable[[np.ndarray], np.ndarray] | None,
+    reflectance_bounds: tuple[float, float] | None,
 ) -> SolveResult:
     """Minimise the joint cost over the parameters where ``mask`` is True.
 
@@ -270,7 +283,8 @@ def _levenberg_marquardt(
     (its normal): steps are projected with ``P = n nᵀ`` per vertex and CG runs on that subspace
     (operator ``P H P``; the block preconditioner inverts the projected blocks). ``constrain``
     maps a trial θ into the feasible set (the vertices' trust regions); the model's prediction
-    is of the step taken.
+    is of the step taken. ``reflectance_bounds`` (lower, upper) keeps every ``B α`` inside
+    (module docstring); θ must start inside.
     """
     cfg = settings or SolverSettings()
     theta = np.array(theta, dtype=float)
@@ -300,19 +314,29 @@ def _levenberg_marquardt(
         if not np.any(g):
             reason = "zero gradient"
             break
+        # Spectra at a bound the gradient pushes them through move only along it: their
+        # α steps are projected onto the face (projected Newton, ε-active set).
+        face = (
+            None if reflectance_bounds is None else _bound_faces(cost, theta, g, reflectance_bounds)
+        )
+        rhs = -g if face is None else face(-g)
         pre = ArrowheadPreconditioner(lin, blocks, lam, scale, mask, directions)
+        precondition = pre if face is None else lambda v, pre=pre, face=face: face(pre(v))
 
         # CG's vectors stay in the stage's subspace (its right-hand side and the
         # preconditioner's output are projected), so only the product leaves it.
         def op(
-            v: np.ndarray, lin: Linearisation = lin, damping: np.ndarray = lam * scale
+            v: np.ndarray,
+            lin: Linearisation = lin,
+            damping: np.ndarray = lam * scale,
+            face: Callable[[np.ndarray], np.ndarray] | None = face,
         ) -> np.ndarray:
             out = lin.matvec(v)
             project_to_stage(out, damping, v, mask, along)
-            return out
+            return out if face is None else face(out)
 
-        delta, cg_it = _pcg(op, -g, pre, cfg.cg_tolerance, cfg.cg_max_iterations)
-        del pre, op  # rebuilt next iteration; not held beside the trial render
+        delta, cg_it = _pcg(op, rhs, precondition, cfg.cg_tolerance, cfg.cg_max_iterations)
+        del pre, op, precondition  # rebuilt next iteration; not held beside the trial render
         gd, dhd = float(g @ delta), float(delta @ lin.matvec(delta))
         # A step the model over-trusted is first shortened along the same direction (a
         # `terms` evaluation each) before λ grows and CG solves again: rejected steps are
@@ -321,8 +345,13 @@ def _levenberg_marquardt(
             fraction = 0.5**shorten
             predicted = -(2.0 * fraction * gd + fraction**2 * dhd)
             trial = theta + fraction * delta
-            if constrain is not None:
-                trial = constrain(trial)
+            if constrain is not None or reflectance_bounds is not None:
+                if constrain is not None:
+                    trial = constrain(trial)
+                if reflectance_bounds is not None:
+                    trial = _within_bounds(
+                        cost, trial, theta, blocks[0], lam * scale, reflectance_bounds
+                    )
                 taken = trial - theta
                 if not np.allclose(taken, fraction * delta, rtol=0.0, atol=1e-15):
                     predicted = -(2.0 * float(g @ taken) + float(taken @ lin.matvec(taken)))
@@ -375,3 +404,65 @@ def _diagonal(cost: JointCost, vert: np.ndarray, light: np.ndarray) -> np.ndarra
     d = np.diagonal(vert, axis1=1, axis2=2)
     dl = np.diagonal(light, axis1=1, axis2=2)
     return p.pack(d[:, :3], d[:, 3:], dl)
+
+
+def _bound_faces(
+    cost: JointCost, theta: np.ndarray, g: np.ndarray, bounds: tuple[float, float]
+) -> Callable[[np.ndarray], np.ndarray] | None:
+    """The projection of a vector's α parts onto the faces of the bounds that bind at θ: for each
+    vertex the wavelengths within ``_AT_BOUND`` of a bound whose descent direction (−g) points
+    out of it, ``P = I − A⁺A`` with A those rows of B. None when nothing binds.
+
+    Without it the step moves such a vertex's α out and the light and its neighbours with it;
+    the projection back then cancels the α part only, and the rest is no longer a descent."""
+    p = cost.p
+    n, nb = p.n_vertices, p.n_basis
+    sa = p.slices()[1]
+    A = theta[sa].reshape(n, nb)
+    r = A @ cost.B.T
+    push = -g[sa].reshape(n, nb) @ cost.B.T  # how −g moves each sample
+    lower, upper = bounds
+    binds = ((r <= lower + _AT_BOUND) & (push < 0)) | ((r >= upper - _AT_BOUND) & (push > 0))
+    rows = np.flatnonzero(binds.any(axis=1))
+    if rows.size == 0:
+        return None
+    active = binds[rows, :, None] * cost.B[None]  # (R, N_λ, N_b): the binding rows of B
+    proj = np.eye(nb) - np.linalg.pinv(active) @ active
+    index = (sa.start + rows[:, None] * nb + np.arange(nb)).ravel()
+
+    def face(v: np.ndarray) -> np.ndarray:
+        out = v.copy()
+        out[index] = np.einsum("rij,rj->ri", proj, v[index].reshape(-1, nb)).ravel()
+        return out
+
+    return face
+
+
+def _within_bounds(
+    cost: JointCost,
+    trial: np.ndarray,
+    theta: np.ndarray,
+    vert: np.ndarray,
+    damping: np.ndarray,
+    bounds: tuple[float, float],
+) -> np.ndarray:
+    """``trial`` with each vertex's α that leaves the bounds replaced by the minimiser, within
+    them, of ``(α − α_trial)ᵀ M (α − α_trial)``, M the vertex's damped α block of the system
+    the step solved; ``theta`` (inside the bounds) is each row's start."""
+    p = cost.p
+    n, nb = p.n_vertices, p.n_basis
+    sa = p.slices()[1]
+    a = trial[sa].reshape(n, nb)
+    metric = vert[:, 3:, 3:] + damping[sa].reshape(n, nb)[:, :, None] * np.eye(nb)
+    # a vertex no term constrains yet (no observation, no edge) still gets a definite metric
+    metric += 1e-12 * np.trace(metric, axis1=1, axis2=2).max() * np.eye(nb)
+    out = trial.copy()
+    out[sa] = bounded_quadratic(
+        metric,
+        np.einsum("nij,nj->ni", metric, a),
+        cost.B,
+        *bounds,
+        start=theta[sa].reshape(n, nb),
+        unconstrained=a,
+    ).ravel()
+    return out

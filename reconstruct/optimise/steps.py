@@ -2,6 +2,9 @@
 vertices fixed, then joint stages; between stages the observation set is rebuilt from the current
 mesh — shadow masks by ray casting to the current lights, projections inside the image and off
 saturated pixels, photometric weights and geometric scales — until the parameters settle.
+
+Every stage keeps each vertex's reflectance within [0, ``OptimiseInput.reflectance_upper``]
+(the solver's ``reflectance_bounds``: projected Levenberg–Marquardt).
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from calibration.bounds import project
 from core.errors import RigError
 from reconstruct.optimise.checkpoint import Checkpoint, OptimiseState
 from reconstruct.optimise.cost import JointCost
@@ -123,6 +127,7 @@ def optimise(
     history: list[dict[str, Any]] = []
     seconds: dict[str, float] = {}
     nb = inp.basis.n_components
+    B, upper = inp.basis.B, inp.reflectance_upper
 
     def run(
         stage: str,
@@ -172,7 +177,9 @@ def optimise(
                 progress(f"{stage} {outer}", rec)
 
         solver = SolverSettings(**{**cfg.solver.__dict__, "max_iterations": iterations})
-        result = levenberg_marquardt(cost, theta, mask, solver, record, directions, constrain)
+        result = levenberg_marquardt(
+            cost, theta, mask, solver, record, directions, constrain, (0.0, upper)
+        )
         seconds[stage] = seconds.get(stage, 0.0) + time.perf_counter() - t0
         log.info(
             "%s %d: %s after %d iterations", stage, outer, result.stop_reason, len(result.history)
@@ -227,7 +234,7 @@ def optimise(
         history[:], A0 = state.history, state.initial_alpha
         seconds.update(state.seconds)
         problem = build_problem(inp, state.vertices, state.light, cfg)
-        theta = problem.pack(state.vertices, state.alpha, state.light)
+        theta = problem.pack(state.vertices, project(state.alpha, B, 0.0, upper), state.light)
         # a finished solve goes straight to its uncertainty and the result
         first_outer = last_outer + 1 if state.done else state.stage + 1
     else:
@@ -240,10 +247,12 @@ def optimise(
                 "shadowed)",
                 "check the poses and the initial mesh, and the exposure of the captures",
             )
-        theta = problem.pack(X, A0, light)
         if inp.initial_alpha is None:
-            A0 = initial_reflectance(problem, theta, inp.basis, cfg.init_smoothness)
             theta = problem.pack(X, A0, light)
+            A0 = initial_reflectance(problem, theta, inp.basis, cfg.init_smoothness, upper)
+        else:
+            A0 = project(A0, B, 0.0, upper)
+        theta = problem.pack(X, A0, light)
         seconds["setup"] = time.perf_counter() - t0
         theta = run(
             "light", 0, problem, theta, problem.mask(False, True, free_light), cfg.light_iterations
@@ -305,6 +314,7 @@ def optimise(
         theta,
         (views >= max(cfg.min_views, 1)) & solved,
         reflectance_prior(inp.basis),
+        upper,
     )
     seconds["uncertainty"] = time.perf_counter() - t0
     X, A, light = problem.unpack(theta)
@@ -330,7 +340,8 @@ def _result(
         vertices=X.copy(),
         faces=np.asarray(inp.faces),
         alpha=A.copy(),
-        reflectance=inp.basis.reconstruct(A),
+        # the solver keeps B α within the bounds; this trims its float round-off (< 1e-10)
+        reflectance=np.clip(inp.basis.reconstruct(A), 0.0, inp.reflectance_upper),
         light=light.copy(),
         light_positions=light_positions(inp.rig, cfg.light_mode, light),
         observed=state.observed,

@@ -27,7 +27,10 @@ N(μ, Σ) (a :class:`ReflectancePrior`) as the prior on α:
   its prior included), and the expected squared error of θ̂ is ``Σ_post + d dᵀ``. d is
   vertex-specific: large where the regularisers decided against what data and real surfaces say;
 * the basis cannot represent a real reflectance exactly: the training set's mean squared
-  residual outside the basis span is added per wavelength.
+  residual outside the basis span is added per wavelength;
+* the band a user sees is the shortest 95 % interval of that error's normal truncated to the
+  physical range (:func:`calibration.bounds.bounded_band`): near 0 or 1 a ±2σ band would claim
+  reflectances that cannot exist.
 
 Neighbour coupling: with the regularisers out of the prior, vertices couple only through the
 normals, the geometric term and the light, weakly enough that the per-vertex blocks stand in for
@@ -44,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibration.basis import SpectralBasis
+from calibration.bounds import bounded_band
 from calibration.defaults import training_reflectances
 from reconstruct.optimise.cost import JointCost
 
@@ -65,6 +69,9 @@ class VertexUncertainty:
     noise_std: float  # per-channel image noise from the residuals, linear image units
     dof: int
     reflectance_std_gn: np.ndarray | None = None  # plain Gauss–Newton std (regularisers as prior)
+    # the 95 % band within the physical range (N, N_λ) each; NaN for unobserved vertices
+    reflectance_low: np.ndarray | None = None
+    reflectance_high: np.ndarray | None = None
 
     def summary(self) -> dict[str, float | int]:
         """Numbers for report.json."""
@@ -94,11 +101,12 @@ def vertex_uncertainty(
     theta: np.ndarray,
     free_positions: np.ndarray,
     prior: ReflectancePrior,
+    upper: float = 1.0,
 ) -> VertexUncertainty:
     """Per-vertex std at θ (module docstring); ``free_positions`` (N,) bool: vertices whose
-    position the last solve moved. The std is the expected error of the estimate under the
-    data and ``prior`` (regularisers out); ``reflectance_std_gn`` is the plain Gauss–Newton std
-    with the regularisers as the prior."""
+    position the last solve moved; ``upper``: the reflectance's upper bound (its band's). The
+    std is the expected error of the estimate under the data and ``prior`` (regularisers out);
+    ``reflectance_std_gn`` is the plain Gauss–Newton std with the regularisers as the prior."""
     p, o = cost.p, cost.p.obs
     n, nb = p.n_vertices, p.n_basis
     lin = cost.linearise(theta, positions=True)
@@ -139,13 +147,17 @@ def vertex_uncertainty(
     var = _spectral_var(B, cov[:, 1:, 1:]) + prior.truncation_var
     pos = np.sqrt(np.maximum(cov[:, 0, 0], 0.0))
     pos[fixed] = np.nan
+    std = np.sqrt(np.maximum(var, 0.0))
+    low, high = bounded_band(A @ B.T, std, 0.0, upper)
     return VertexUncertainty(
-        reflectance_std=np.sqrt(np.maximum(var, 0.0)),
+        reflectance_std=std,
         position_std_m=pos,
         alpha_cov=cov[:, 1:, 1:],
         noise_std=float(np.sqrt(s2) / p.weights.rendering_scale),
         dof=dof,
         reflectance_std_gn=gn_std,
+        reflectance_low=low,
+        reflectance_high=high,
     )
 
 

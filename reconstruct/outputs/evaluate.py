@@ -51,6 +51,9 @@ class Evaluation:
     spectral_rmse_all: float  # mean over all vertices
     observed_vertices: int
     vertices: int
+    # reflectance samples (vertex, wavelength) below 0 or above 1: physically impossible values
+    outside_unit_range: int = 0
+    reflectance_range: tuple[float, float] = (0.0, 1.0)
     light_offset_error_m: float | None = None
     light_offset_m: list[float] | None = None
     colour: list[dict[str, Any]] = field(default_factory=list)  # ColourReport.as_dict per light
@@ -65,6 +68,11 @@ class Evaluation:
                 f"{self.spectral_rmse:.4f}",
             ),
             (f"spectral RMSE (all {self.vertices} vertices)", f"{self.spectral_rmse_all:.4f}"),
+            (
+                "reflectance samples outside [0, 1] (min / max)",
+                f"{self.outside_unit_range} ({self.reflectance_range[0]:.3f} / "
+                f"{self.reflectance_range[1]:.3f})",
+            ),
         ]
         rows += colour_rows(self.colour)
         if self.light_offset_error_m is not None:
@@ -302,6 +310,8 @@ def _evaluate(
         spectral_rmse_all=float(np.mean(rmse)),
         observed_vertices=int(observed.sum()),
         vertices=len(X),
+        outside_unit_range=int(np.count_nonzero((refl < 0) | (refl > 1))),
+        reflectance_range=(float(refl.min()), float(refl.max())),
         colour=[c.as_dict() for c in colour],
     )
     report_path = (recon if recon.is_dir() else recon.parent) / export.REPORT_FILE

@@ -8,7 +8,8 @@
 * ``reflectance.npz`` — ``vertices`` (N, 3), ``faces`` (F, 3), ``wavelengths_nm`` (N_λ,),
   ``reflectance`` (N, N_λ), ``alpha`` (N, N_b), ``basis`` (N_λ, N_b), ``normals``, ``observed``,
   with an uncertainty ``reflectance_std`` (N, N_λ) and ``position_std_m`` (N,) (std along the
-  normal; NaN where not estimated);
+  normal; NaN where not estimated) and ``reflectance_low``/``reflectance_high`` (N, N_λ), the
+  95 % band inside the physical range;
 * ``report.json`` — see :func:`write_report`.
 """
 

@@ -51,24 +51,24 @@ def spectra(
     indices: np.ndarray,
     initial: np.ndarray | None = None,
     truth: np.ndarray | None = None,
-    std: np.ndarray | None = None,
+    band: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Path:
-    """Estimated spectra of ``indices``; ``std`` (N, N_λ) adds a shaded ±2σ band."""
+    """Estimated spectra of ``indices``; ``band`` (low, high), (N, N_λ) each, adds the shaded
+    95 % uncertainty band (within [0, 1]: :func:`calibration.bounds.bounded_band`)."""
     fig, ax = plt.subplots(figsize=(7, 4.5))
     colors = plt.cm.tab10(np.linspace(0, 1, 10))
     for k, i in enumerate(indices):
         col = colors[k % 10]
         ax.plot(wavelengths, reflectance[i], color=col, lw=1.8, label=f"vertex {i}")
-        if std is not None and np.all(np.isfinite(std[i])):
-            lo, hi = reflectance[i] - 2 * std[i], reflectance[i] + 2 * std[i]
-            ax.fill_between(wavelengths, lo, hi, color=col, alpha=0.15, lw=0)
+        if band is not None and np.all(np.isfinite(band[0][i])):
+            ax.fill_between(wavelengths, band[0][i], band[1][i], color=col, alpha=0.15, lw=0)
         if initial is not None:
             ax.plot(wavelengths, initial[i], color=col, lw=0.8, ls=":")
         if truth is not None:
             ax.plot(wavelengths, truth[k], color=col, lw=0.8, ls="--")
     ax.set_xlabel("wavelength (nm)")
     ax.set_ylabel("reflectance")
-    note = "solid: estimate" + (" ±2σ" if std is not None else "")
+    note = "solid: estimate" + (", 95 % band" if band is not None else "")
     note += ", dotted: 2-D initial" if initial is not None else ""
     note += ", dashed: truth" if truth is not None else ""
     ax.set_title(f"Spectral reflectance at sample vertices ({note})", fontsize=9)

@@ -6,6 +6,7 @@
 >>> result.reflectance.shape                     # (N, 31): 400-700 nm in 10 nm steps
 >>> result.spectra[550]                          # colour.MultiSpectralDistributions, one per vertex
 >>> result.reflectance_std, result.position_std_m  # uncertainty (NaN where not estimated)
+>>> result.reflectance_band                      # (low, high): 95 % band inside [0, 1]
 >>> result.report["light"]["offset_m"]
 >>> result.paths.mesh                            # recon/mesh.ply
 
@@ -57,6 +58,8 @@ class ReconstructionResult:
     reflectance: np.ndarray  # (N, L)
     reflectance_std: np.ndarray | None  # (N, L), NaN where not estimated
     position_std_m: np.ndarray | None  # (N,), along the normal
+    # (low, high) (N, L) each: the 95 % band, inside the physical range; NaN where not estimated
+    reflectance_band: tuple[np.ndarray, np.ndarray] | None
     observed: np.ndarray  # (N,) bool: seen by a camera (else filled from neighbours)
     report: dict[str, Any]
     paths: ResultPaths
@@ -99,6 +102,11 @@ def load_result(path: Path | str) -> ReconstructionResult:
         reflectance=arrays["reflectance"].astype(float),
         reflectance_std=arrays.get("reflectance_std"),
         position_std_m=arrays.get("position_std_m"),
+        reflectance_band=(
+            (arrays["reflectance_low"], arrays["reflectance_high"])
+            if "reflectance_low" in arrays and "reflectance_high" in arrays
+            else None
+        ),
         observed=arrays.get("observed", np.ones(n, bool)).astype(bool),
         report=report,
         paths=paths,

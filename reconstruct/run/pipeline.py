@@ -223,6 +223,9 @@ def optimiser_input(front: FrontResult, session: Session, basis: SpectralBasis) 
         rig=rig,
         frames=frames,
         basis=basis,
+        # without a metric scale the light's distance, and with it the reflectance's scale, is
+        # known only up to a factor: only the lower bound is physical
+        reflectance_upper=1.0 if front.scale_is_metric else np.inf,
     )
 
 
@@ -242,11 +245,16 @@ def export_result(
     normals, _ = vertex_normals(result.vertices, result.faces)
     unc = result.uncertainty
     std = None if unc is None else unc.reflectance_std
+    band = None if unc is None or unc.reflectance_low is None else (
+        unc.reflectance_low, unc.reflectance_high
+    )
     arrays = (
         {}
         if unc is None
         else {"reflectance_std": unc.reflectance_std, "position_std_m": unc.position_std_m}
     )
+    if band is not None:
+        arrays |= {"reflectance_low": band[0], "reflectance_high": band[1]}
     # the 2-D estimate the joint solve started from, for viewers comparing the two
     arrays["initial_reflectance"] = inp.basis.reconstruct(result.initial_alpha)
     ply_extra = (
@@ -295,7 +303,7 @@ def export_result(
             result.reflectance,
             sample,
             initial=inp.basis.reconstruct(result.initial_alpha),
-            std=std,
+            band=band,
         )
     )
     if std is not None:

@@ -70,6 +70,7 @@ def test_light_only_stage_recovers_the_offset_from_zero(scene: SyntheticScene) -
         problem.mask(False, True, True),
         SolverSettings(max_iterations=40),
         lambda rec: history.append(rec.terms["total"]),
+        reflectance_bounds=(0.0, 1.0),  # as the pipeline's stages run
     )
     _, A, light = problem.unpack(result.theta)
     assert np.linalg.norm(light[0] - scene.light_offset) < 1e-3

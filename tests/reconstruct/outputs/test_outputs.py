@@ -151,7 +151,16 @@ def test_evaluation_of_the_truth_and_of_a_shifted_mesh(
     assert ev.accuracy_m < 1e-6 and ev.completeness_m < 1e-6
     assert ev.spectral_rmse < 1e-6
     assert ev.light_offset_error_m == pytest.approx(0.005, abs=1e-9)
+    assert ev.outside_unit_range == 0
     assert (recon_dir / "spectral_error_map.png").is_file()
+    # a reconstruction with impossible values is told so, sample by sample
+    bad = tmp_path / "bad.npz"
+    arrays = dict(np.load(recon_dir / "reflectance.npz"))
+    arrays["reflectance"][:2, :3] = [[-0.1, 0.2, 1.3], [0.5, 1.01, 0.0]]
+    np.savez(bad, **arrays)
+    ev = evaluate(bad, gt_mesh, gt_refl, None, tmp_path / "bad")
+    assert ev.outside_unit_range == 3
+    assert ev.reflectance_range == (-0.1, 1.3)
     normals, _ = vertex_normals(scene.vertices, scene.faces)
     d, _, _ = surface_distance(
         scene.vertices + 0.001 * normals, trimesh.load(gt_mesh, process=False)
