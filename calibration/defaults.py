@@ -187,13 +187,17 @@ def colorchecker_reflectances(grid: SpectralGrid = DEFAULT_GRID) -> tuple[list[s
     return names, resample(w, values, grid, source="ColorChecker 24 (BabelColor)").T
 
 
-def training_reflectances(grid: SpectralGrid = DEFAULT_GRID) -> np.ndarray:
-    """rawtoaces' 190 training patches plus the ColorChecker 24: (214, N_λ)."""
+def rawtoaces_reflectances(grid: SpectralGrid = DEFAULT_GRID) -> np.ndarray:
+    """rawtoaces' 190 training patches (colour-science): (190, N_λ)."""
     msds = colour.characterisation.read_training_data_rawtoaces_v1()
-    patches = resample(
+    return resample(
         msds.wavelengths, msds.values, grid, source="rawtoaces 190 training patches"
     ).T
-    return np.vstack([patches, colorchecker_reflectances(grid)[1]])
+
+
+def training_reflectances(grid: SpectralGrid = DEFAULT_GRID) -> np.ndarray:
+    """rawtoaces' 190 training patches plus the ColorChecker 24: (214, N_λ)."""
+    return np.vstack([rawtoaces_reflectances(grid), colorchecker_reflectances(grid)[1]])
 
 
 def illuminant_names() -> list[str]:

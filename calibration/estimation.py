@@ -3,13 +3,15 @@
 Per pixel p, with response matrices ``A_k = Cᵀ diag(L_k)`` (times any known shading) and the
 basis ``r = B α``::
 
-    minimise_α  Σ_k ‖y_pk − A_k B α‖²  +  λ ‖D B α‖²
+    minimise_α  Σ_k ‖y_pk − A_k B α‖²  +  λ ‖R (α − μ)‖²
 
-where D is the second-difference operator (paper eq. 8). λ is *relative*:
-``λ = smoothness · tr(Σ_k (A_k B)ᵀ A_k B) / tr((D B)ᵀ D B)``, so the same ``smoothness`` works
-whatever the units of the light and the exposure. Without per-pixel weights the normal equations
-are solved once and applied to every pixel as one (N_b × 3K) matrix; with per-pixel shading or
-missing (NaN) values each pixel gets its own small N_b × N_b system, solved in batches.
+with the spectral regulariser R, μ of :mod:`calibration.prior` (default: the training prior;
+``smoothness``: R = D B, the second-difference operator of paper eq. 8, μ = 0). λ is *relative*:
+``λ = smoothness · tr(Σ_k (A_k B)ᵀ A_k B) / tr((D B)ᵀ D B)`` (every regulariser is expressed in
+the smoothness's units), so the same ``smoothness`` works whatever the units of the light and
+the exposure. Without per-pixel weights the normal equations are solved once for every pixel;
+with per-pixel shading or missing (NaN) values each pixel gets its own small N_b × N_b system,
+solved in batches.
 Every estimate is physically valid: with ``bounds`` (default ``(0, 1)``) the same quadratic is
 minimised subject to ``0 ≤ B α ≤ 1`` at every wavelength (:mod:`calibration.bounds`) wherever its
 unconstrained minimiser leaves them.
@@ -22,7 +24,12 @@ import numpy as np
 
 from calibration.basis import SpectralBasis
 from calibration.bounds import bounded_quadratic
-from calibration.spectra import second_difference_matrix
+from calibration.prior import (
+    Regulariser,
+    SpectralRegulariser,
+    smoothness_gram,
+    spectral_regulariser,
+)
 from core.errors import RigError
 
 DEFAULT_SMOOTHNESS = 0.1
@@ -60,30 +67,29 @@ def _check(rgb: np.ndarray, resp: np.ndarray, basis: SpectralBasis) -> None:
         )
 
 
-def smoothness_gram(basis: SpectralBasis) -> np.ndarray:
-    """(D B)ᵀ (D B): the spectral smoothness penalty in basis weights."""
-    db = second_difference_matrix(basis.B.shape[0]) @ basis.B
-    return db.T @ db
-
-
 def normal_equations(
-    resp: np.ndarray, basis: SpectralBasis, smoothness: float = DEFAULT_SMOOTHNESS
-) -> tuple[np.ndarray, np.ndarray]:
-    """The estimator's quadratic for unit shading: ``(lhs (N_b, N_b), m (3K, N_b))``, minimised
-    by ``lhs α = mᵀ y`` with y the K RGB triples stacked."""
+    resp: np.ndarray,
+    basis: SpectralBasis,
+    smoothness: float = DEFAULT_SMOOTHNESS,
+    regulariser: SpectralRegulariser | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The estimator's quadratic for unit shading: ``(lhs (N_b, N_b), m (3K, N_b), c (N_b,))``,
+    minimised by ``lhs α = mᵀ y + c`` with y the K RGB triples stacked; ``regulariser``
+    (default: smoothness) weighted by ``smoothness`` relative to the data."""
+    reg = regulariser or spectral_regulariser("smoothness", basis)
     m = (resp @ basis.B).reshape(-1, basis.n_components)  # (3K, N_b)
     gram = m.T @ m
-    smooth = smoothness_gram(basis)
-    lam = smoothness * np.trace(gram) / np.trace(smooth)
-    return gram + lam * smooth + 1e-12 * np.trace(gram) * np.eye(gram.shape[0]), m
+    lam = smoothness * np.trace(gram) / np.trace(smoothness_gram(basis.B))
+    lhs = gram + lam * reg.matrix + 1e-12 * np.trace(gram) * np.eye(gram.shape[0])
+    return lhs, m, lam * reg.matrix @ reg.mean
 
 
 def estimation_matrix(
     resp: np.ndarray, basis: SpectralBasis, smoothness: float = DEFAULT_SMOOTHNESS
 ) -> np.ndarray:
-    """The linear (unbounded) estimator W (N_b, 3K): ``α = W y`` with y the K RGB triples
-    stacked."""
-    lhs, m = normal_equations(resp, basis, smoothness)
+    """The linear (unbounded) smoothness estimator W (N_b, 3K): ``α = W y`` with y the K RGB
+    triples stacked (illumination selection's noise model)."""
+    lhs, m, _ = normal_equations(resp, basis, smoothness)
     return np.linalg.solve(lhs, m.T)
 
 
@@ -96,6 +102,7 @@ def estimate_reflectance(
     fit_scale: bool = False,
     shading: np.ndarray | None = None,
     bounds: Bounds = REFLECTANCE_BOUNDS,
+    regulariser: Regulariser | SpectralRegulariser = "training",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Reflectance per pixel from ``rgb`` (P, K, 3) under ``responses`` (K, 3, N_λ), the
     matrices :func:`response_matrices` builds.
@@ -104,9 +111,10 @@ def estimate_reflectance(
     (0 = not observed). NaN entries in ``rgb`` are missing values (saturated/masked) and are
     ignored. Pixels with no usable observation get NaN. With ``fit_scale`` the overall scale is
     treated as unknown (unknown shading or exposure) and each reflectance is normalised to a
-    maximum of 1 (only the lower bound applies then). ``bounds``: the reflectance's
-    ``(lower, upper)`` (an infinite upper bound where the scale is unknown), or None for the
-    unbounded linear estimate. Returns ``(alpha (P, N_b), reflectance (P, N_λ))``.
+    maximum of 1 (only the lower bound and the regulariser's shape apply then). ``bounds``: the
+    reflectance's ``(lower, upper)`` (an infinite upper bound where the scale is unknown), or None for the
+    unbounded linear estimate. ``regulariser``: what fills what the data do not say
+    (:mod:`calibration.prior`). Returns ``(alpha (P, N_b), reflectance (P, N_λ))``.
     """
     y = np.asarray(rgb, dtype=float)
     resp = np.asarray(responses, dtype=float)
@@ -116,17 +124,23 @@ def estimate_reflectance(
             f"smoothness {smoothness:g} is negative or NaN",
             f"use 0 (none) or a positive relative weight (default {DEFAULT_SMOOTHNESS})",
         )
-    if bounds is not None and fit_scale:
-        bounds = (bounds[0], np.inf)
+    reg = (
+        regulariser
+        if isinstance(regulariser, SpectralRegulariser)
+        else spectral_regulariser(regulariser, basis)
+    )
+    if fit_scale:  # an unknown scale: no upper bound, no absolute mean
+        bounds = None if bounds is None else (bounds[0], np.inf)
+        reg = reg.scale_free()
     missing = ~np.isfinite(y)
     if shading is None and not missing.any():
-        lhs, m = normal_equations(resp, basis, smoothness)
-        rhs = y.reshape(y.shape[0], -1) @ m
+        lhs, m, c = normal_equations(resp, basis, smoothness, reg)
+        rhs = y.reshape(y.shape[0], -1) @ m + c
         alpha = np.linalg.solve(lhs, rhs.T).T
         if bounds is not None:
             alpha = bounded_quadratic(lhs, rhs, basis.B, *bounds, unconstrained=alpha)
     else:
-        alpha = _estimate_weighted(y, resp, basis, smoothness, shading, missing, bounds)
+        alpha = _estimate_weighted(y, resp, basis, smoothness, reg, shading, missing, bounds)
     if fit_scale:
         refl = basis.reconstruct(alpha)
         scale = np.max(refl, axis=1, keepdims=True)
@@ -140,6 +154,7 @@ def _estimate_weighted(
     resp: np.ndarray,
     basis: SpectralBasis,
     smoothness: float,
+    reg: SpectralRegulariser,
     shading: np.ndarray | None,
     missing: np.ndarray,
     bounds: Bounds,
@@ -156,8 +171,8 @@ def _estimate_weighted(
                 "give one shading factor per pixel and illumination (0 = not observed)",
             )
     m = resp @ basis.B  # (K, 3, N_b)
-    smooth = smoothness_gram(basis)
-    tr_smooth = np.trace(smooth)
+    tr_smooth = np.trace(smoothness_gram(basis.B))
+    prior_rhs = reg.matrix @ reg.mean
     nb = basis.n_components
     alpha = np.full((p, nb), np.nan)
     for start in range(0, p, BATCH):
@@ -169,7 +184,8 @@ def _estimate_weighted(
         tr = np.trace(gram, axis1=1, axis2=2)
         ok = tr > 0
         lam = smoothness * tr / tr_smooth
-        lhs = gram + lam[:, None, None] * smooth + (1e-12 * tr)[:, None, None] * np.eye(nb)
+        lhs = gram + lam[:, None, None] * reg.matrix + (1e-12 * tr)[:, None, None] * np.eye(nb)
+        rhs += lam[:, None] * prior_rhs
         lhs[~ok] = np.eye(nb)
         sol = np.linalg.solve(lhs, rhs[..., None])[..., 0]
         if bounds is not None:
@@ -184,9 +200,10 @@ def noise_free_estimate(
     responses: np.ndarray,
     basis: SpectralBasis,
     smoothness: float = DEFAULT_SMOOTHNESS,
+    regulariser: Regulariser | SpectralRegulariser = "training",
 ) -> np.ndarray:
     """The estimator's answer (P, N_λ) for reflectances (P, N_λ) seen with unit, known shading
     and no noise: the information floor of the illuminations and camera in ``responses``."""
     r = np.asarray(reflectance, dtype=float)
     rgb = np.einsum("kcl,pl->pkc", np.asarray(responses, dtype=float), r)
-    return estimate_reflectance(rgb, responses, basis, smoothness)[1]
+    return estimate_reflectance(rgb, responses, basis, smoothness, regulariser=regulariser)[1]

@@ -15,6 +15,7 @@ from typing import Literal
 
 import numpy as np
 
+from calibration.prior import SpectralRegulariser
 from core.errors import RigError
 from reconstruct.model.camera import Intrinsics, Pose
 
@@ -110,7 +111,7 @@ class Observations:
 
 @dataclass
 class Weights:
-    """γ = (spectral, photometric, geometric) smoothness, per-edge photometric weights w_ij
+    """γ = (spectral, photometric, geometric) weights, per-edge photometric weights w_ij
     (edges (E, 2), i < j), the per-vertex geometric scale l_i (metres), and the unit of the
     rendering term: image values are multiplied by ``rendering_scale`` before differencing
     (255 = 8-bit units, the units the paper's γ were tuned in)."""
@@ -120,6 +121,7 @@ class Weights:
     edge_weight: np.ndarray
     scale: np.ndarray
     rendering_scale: float = 1.0
+    spectral: SpectralRegulariser | None = None  # what γ1 weighs; None: the paper's smoothness
 
 
 @dataclass

@@ -8,6 +8,7 @@ import numpy as np
 
 from calibration.basis import SpectralBasis
 from calibration.estimation import estimate_reflectance
+from calibration.prior import spectral_regulariser
 from core.errors import RigError
 from reconstruct.model.forward import shading
 from reconstruct.model.raycast import RayCaster
@@ -97,7 +98,10 @@ def build_problem(
         cfg.sigma_chroma,
         cfg.sigma_intensity,
     )
-    weights = Weights(cfg.gamma, e, w, edge_scale(X, adj), cfg.rendering_scale)
+    spectral = spectral_regulariser(cfg.spectral_prior, inp.basis)
+    if not np.isfinite(inp.reflectance_upper):  # a relative scale: no absolute mean either
+        spectral = spectral.scale_free()
+    weights = Weights(cfg.gamma, e, w, edge_scale(X, adj), cfg.rendering_scale, spectral)
     return Problem(
         inp.faces, n, inp.basis.B, inp.rig, fr, obs, weights, problem_mode(cfg.light_mode)
     )
@@ -112,7 +116,8 @@ def initial_reflectance(
 ) -> np.ndarray:
     """α from the calibration module's 2-D estimate, per vertex, with the current shading:
     each (vertex, illumination)'s observations are pooled by least squares into one RGB and a
-    shading weight; vertices never observed get the mean α. Reflectance within [0, ``upper``]."""
+    shading weight; vertices never observed get the mean α. Reflectance within [0, ``upper``],
+    regularised as the problem's spectral term is."""
     cost = JointCost(problem)
     X, A, light = problem.unpack(theta)
     normals, _ = vertex_normals(X, problem.faces)
@@ -133,8 +138,13 @@ def initial_reflectance(
     rows = np.flatnonzero(seen.any(axis=1))
     if rows.size:
         alpha[rows], _ = estimate_reflectance(
-            rgb[rows], problem.rig.responses, basis, smoothness, shading=root[rows],
+            rgb[rows],
+            problem.rig.responses,
+            basis,
+            smoothness,
+            shading=root[rows],
             bounds=(0.0, upper),
+            regulariser=problem.weights.spectral or "smoothness",
         )
     good = np.all(np.isfinite(alpha), axis=1)
     fill = alpha[good].mean(axis=0) if good.any() else basis.project(np.full(basis.B.shape[0], 0.5))

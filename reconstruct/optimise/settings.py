@@ -11,6 +11,7 @@ import numpy as np
 
 from calibration.basis import SpectralBasis
 from calibration.estimation import DEFAULT_SMOOTHNESS
+from calibration.prior import Regulariser
 from core.config import bounded, from_mapping
 from reconstruct.optimise.cost import Robust
 from reconstruct.optimise.problem import Frames, Rig
@@ -31,6 +32,9 @@ class OptimiseSettings:
     # γ2 (photometric) is 4, not 2: where a thin part's normals end off, only the vertex's
     # neighbours can correct its mis-scaled reflectance (docs/architecture.md, Cost).
     gamma: tuple[float, float, float] = bounded((3.0, 4.0, 0.01), min=0.0, max=1e9)
+    # What γ1 weighs (calibration.prior): the training reflectances' Gaussian prior, or the
+    # paper's spectral smoothness (eq. 14), kept to reproduce the paper.
+    spectral_prior: Regulariser = "training"
     # The rendering term is evaluated in 8-bit units (image value × 255), as in the paper's
     # implementation: in 0..1 linear units the paper's γ over-regularise by 255² (the light
     # distance then trades against the reflectance scale; light z off by centimetres).

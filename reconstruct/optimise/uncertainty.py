@@ -49,16 +49,9 @@ import numpy as np
 from calibration.basis import SpectralBasis
 from calibration.bounds import bounded_band
 from calibration.defaults import training_reflectances
+from calibration.prior import WeightStatistics as ReflectancePrior
+from calibration.prior import weight_statistics
 from reconstruct.optimise.cost import JointCost
-
-
-@dataclass
-class ReflectancePrior:
-    """What real surfaces look like in the basis: the training reflectances' weights."""
-
-    mean: np.ndarray  # (N_b,) μ
-    cov: np.ndarray  # (N_b, N_b) Σ
-    truncation_var: np.ndarray  # (N_λ,) mean squared residual outside the basis span
 
 
 @dataclass
@@ -137,7 +130,7 @@ def vertex_uncertainty(
     B = cost.B
     gn_std = _spectral_std(B, cov[:, 1:, 1:])
     gx, ga, _ = p.unpack(lin.gradient())
-    reg_grad = cost.gamma[0] * A @ cost.SS + (cost.laplacian @ A) @ cost.BB
+    reg_grad = cost.gamma[0] * (A - cost.spectral_mean) @ cost.SS + (cost.laplacian @ A) @ cost.BB
     grad = np.zeros((n, 1 + nb))
     grad[:, 0] = np.where(fixed, 0.0, np.einsum("ij,ij->i", gx, normals))
     grad[:, 1:] = ga - reg_grad
@@ -193,11 +186,5 @@ def reflectance_prior(basis: SpectralBasis) -> ReflectancePrior:
     the basis is built from) — how far a reflectance may lie in directions the camera under the
     bulb's illuminations does not see — and their mean squared residual outside the basis span
     (what no weights can represent)."""
-    refl = training_reflectances(basis.grid)
-    weights = basis.project(refl)
-    residual = refl - basis.reconstruct(weights)
-    return ReflectancePrior(
-        mean=np.mean(weights, axis=0),
-        cov=np.cov(weights, rowvar=False),
-        truncation_var=np.mean(residual**2, axis=0),
-    )
+    stats = weight_statistics(basis, training_reflectances(basis.grid))
+    return ReflectancePrior(stats.mean, stats.cov, stats.truncation_var)
