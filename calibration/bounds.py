@@ -182,10 +182,10 @@ def _active_set(
             if k == 0:
                 break
             mu = sol[n:]
-            j = np.argmin(mu)
-            if mu[j] >= 0.0:
+            leave = np.argmin(mu)
+            if mu[leave] >= 0.0:
                 break
-            active[work[j]] = False
+            active[work[leave]] = False
             continue
         step = 1.0
         blocking = -1

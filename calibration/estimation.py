@@ -3,10 +3,11 @@
 Per pixel p, with response matrices ``A_k = Cᵀ diag(L_k)`` (times any known shading) and the
 basis ``r = B α``::
 
-    minimise_α  Σ_k ‖y_pk − A_k B α‖²  +  λ ‖R (α − μ)‖²
+    minimise_α  Σ_k ‖y_pk − A_k B α‖²  +  λ αᵀ P α
 
-with the spectral regulariser R, μ of :mod:`calibration.prior` (default: the training prior;
-``smoothness``: R = D B, the second-difference operator of paper eq. 8, μ = 0). λ is *relative*:
+with the spectral regulariser P of :mod:`calibration.prior` (default: the training prior;
+``smoothness``: P = (D B)ᵀ(D B), D the second-difference operator of paper eq. 8). λ is
+*relative*:
 ``λ = smoothness · tr(Σ_k (A_k B)ᵀ A_k B) / tr((D B)ᵀ D B)`` (every regulariser is expressed in
 the smoothness's units), so the same ``smoothness`` works whatever the units of the light and
 the exposure. Without per-pixel weights the normal equations are solved once for every pixel;
@@ -72,16 +73,16 @@ def normal_equations(
     basis: SpectralBasis,
     smoothness: float = DEFAULT_SMOOTHNESS,
     regulariser: SpectralRegulariser | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The estimator's quadratic for unit shading: ``(lhs (N_b, N_b), m (3K, N_b), c (N_b,))``,
-    minimised by ``lhs α = mᵀ y + c`` with y the K RGB triples stacked; ``regulariser``
-    (default: smoothness) weighted by ``smoothness`` relative to the data."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """The estimator's quadratic for unit shading: ``(lhs (N_b, N_b), m (3K, N_b))``, minimised
+    by ``lhs α = mᵀ y`` with y the K RGB triples stacked; ``regulariser`` (default: smoothness)
+    weighted by ``smoothness`` relative to the data."""
     reg = regulariser or spectral_regulariser("smoothness", basis)
     m = (resp @ basis.B).reshape(-1, basis.n_components)  # (3K, N_b)
     gram = m.T @ m
     lam = smoothness * np.trace(gram) / np.trace(smoothness_gram(basis.B))
     lhs = gram + lam * reg.matrix + 1e-12 * np.trace(gram) * np.eye(gram.shape[0])
-    return lhs, m, lam * reg.matrix @ reg.mean
+    return lhs, m
 
 
 def estimation_matrix(
@@ -89,7 +90,7 @@ def estimation_matrix(
 ) -> np.ndarray:
     """The linear (unbounded) smoothness estimator W (N_b, 3K): ``α = W y`` with y the K RGB
     triples stacked (illumination selection's noise model)."""
-    lhs, m, _ = normal_equations(resp, basis, smoothness)
+    lhs, m = normal_equations(resp, basis, smoothness)
     return np.linalg.solve(lhs, m.T)
 
 
@@ -111,10 +112,10 @@ def estimate_reflectance(
     (0 = not observed). NaN entries in ``rgb`` are missing values (saturated/masked) and are
     ignored. Pixels with no usable observation get NaN. With ``fit_scale`` the overall scale is
     treated as unknown (unknown shading or exposure) and each reflectance is normalised to a
-    maximum of 1 (only the lower bound and the regulariser's shape apply then). ``bounds``: the
-    reflectance's ``(lower, upper)`` (an infinite upper bound where the scale is unknown), or None for the
-    unbounded linear estimate. ``regulariser``: what fills what the data do not say
-    (:mod:`calibration.prior`). Returns ``(alpha (P, N_b), reflectance (P, N_λ))``.
+    maximum of 1 (only the lower bound applies then). ``bounds``: the
+    reflectance's ``(lower, upper)`` (an infinite upper bound where the scale is unknown), or
+    None for the unbounded linear estimate. ``regulariser``: what fills what the data do not
+    say (:mod:`calibration.prior`). Returns ``(alpha (P, N_b), reflectance (P, N_λ))``.
     """
     y = np.asarray(rgb, dtype=float)
     resp = np.asarray(responses, dtype=float)
@@ -129,13 +130,12 @@ def estimate_reflectance(
         if isinstance(regulariser, SpectralRegulariser)
         else spectral_regulariser(regulariser, basis)
     )
-    if fit_scale:  # an unknown scale: no upper bound, no absolute mean
-        bounds = None if bounds is None else (bounds[0], np.inf)
-        reg = reg.scale_free()
+    if fit_scale and bounds is not None:  # an unknown scale: no upper bound
+        bounds = (bounds[0], np.inf)
     missing = ~np.isfinite(y)
     if shading is None and not missing.any():
-        lhs, m, c = normal_equations(resp, basis, smoothness, reg)
-        rhs = y.reshape(y.shape[0], -1) @ m + c
+        lhs, m = normal_equations(resp, basis, smoothness, reg)
+        rhs = y.reshape(y.shape[0], -1) @ m
         alpha = np.linalg.solve(lhs, rhs.T).T
         if bounds is not None:
             alpha = bounded_quadratic(lhs, rhs, basis.B, *bounds, unconstrained=alpha)
@@ -172,7 +172,6 @@ def _estimate_weighted(
             )
     m = resp @ basis.B  # (K, 3, N_b)
     tr_smooth = np.trace(smoothness_gram(basis.B))
-    prior_rhs = reg.matrix @ reg.mean
     nb = basis.n_components
     alpha = np.full((p, nb), np.nan)
     for start in range(0, p, BATCH):
@@ -185,7 +184,6 @@ def _estimate_weighted(
         ok = tr > 0
         lam = smoothness * tr / tr_smooth
         lhs = gram + lam[:, None, None] * reg.matrix + (1e-12 * tr)[:, None, None] * np.eye(nb)
-        rhs += lam[:, None] * prior_rhs
         lhs[~ok] = np.eye(nb)
         sol = np.linalg.solve(lhs, rhs[..., None])[..., 0]
         if bounds is not None:

@@ -1,24 +1,27 @@
 """What a reflectance is expected to look like before the camera says anything: the spectral
-regulariser ``‖R (α − μ)‖²`` of every estimate, and the statistics of real surfaces' basis weights.
+regulariser ``αᵀ P α`` of every estimate, and the statistics of real surfaces' basis weights.
 
-Two cameras' RGB under two lamps give six numbers for eight basis weights: the rest of the
-spectrum is the regulariser's. Two regularisers are registered:
+Two lamps × RGB give six numbers for eight basis weights: the rest of the spectrum is the
+regulariser's. Two regularisers are registered:
 
-* ``training`` (the default): a Gaussian prior on α learnt from real reflectances
+* ``training`` (the default): the Gaussian prior of real reflectances' basis weights
   (:func:`weight_statistics` of rawtoaces' 190 training patches; the ColorChecker, which every
-  benchmark scene is painted with, is left out), ``R = Σ^-½``, ``μ`` their mean weights;
-* ``smoothness``: the paper's eq. 14, the second difference of ``B α`` over wavelength
-  (``R`` its R factor, ``μ = 0``).
+  benchmark scene is painted with, is left out) — its precision Σ⁻¹ with the direction of their
+  mean weights μ taken out, ``P = Σ⁻¹ − Σ⁻¹μ μᵀΣ⁻¹ / μᵀΣ⁻¹μ``: it judges a spectrum's *shape*
+  against real surfaces' at whatever brightness (``P μ = 0``), so it never pulls on the
+  brightness, which the light's distance, the shading and so the geometry trade against;
+* ``smoothness``: the paper's eq. 14, the second difference of ``B α`` over wavelength, which
+  likewise leaves a flat spectrum of any level alone.
 
-Both are expressed in the smoothness's units (their matrices ``RᵀR`` scaled to a fixed share
-of its trace), so the relative weights of the 2-D estimator and the γ1 of the joint cost mean
-the same strength whichever is used. Measured on the information floor (bench/README.md): the
-training prior holds more of the spectrum's shape than smoothness does where no channel sees it.
+Both are expressed in the smoothness's units (the training precision scaled to a fixed share of
+the smoothness's trace), so the relative weights of the 2-D estimator and the γ1 of the joint
+cost mean the same strength whichever is used. Measured on the information floor
+(bench/README.md, ``bench.spectral_prior``).
 
 >>> from calibration.basis import default_basis
 >>> reg = spectral_regulariser("training", default_basis())
->>> reg.matrix.shape, reg.mean.shape
-((8, 8), (8,))
+>>> reg.matrix.shape
+(8, 8)
 """
 
 from __future__ import annotations
@@ -34,24 +37,18 @@ from core.errors import RigError
 
 Regulariser = Literal["training", "smoothness"]
 REGULARISERS: tuple[Regulariser, ...] = ("training", "smoothness")
-# The training prior's trace as a share of the smoothness's: the relative weight at which, with
-# the 2-D estimator's default smoothness, it reaches the lowest ΔE00 on held-out Munsell chips
-# under the benchmark's measured lamps and cameras with 1 % noise (bench/README.md).
+# The training precision's trace as a share of the smoothness's (before its mean direction is
+# taken out): read off held-out Munsell chips under the benchmark's measured lamps and cameras
+# with 1 % noise (bench/README.md, spectral_prior).
 TRAINING_STRENGTH = 0.1
 
 
 @dataclass(frozen=True)
 class SpectralRegulariser:
-    """``‖R (α − μ)‖²`` over basis weights α: ``matrix = RᵀR`` (N_b, N_b), ``mean = μ``."""
+    """``αᵀ P α`` over basis weights α, ``matrix = P`` (N_b, N_b), positive semi-definite."""
 
     name: str
     matrix: np.ndarray
-    mean: np.ndarray
-
-    def scale_free(self) -> SpectralRegulariser:
-        """The same shape penalty about 0: for reflectances known only up to a factor, which
-        an absolute mean would pull on."""
-        return SpectralRegulariser(self.name, self.matrix, np.zeros_like(self.mean))
 
     @property
     def factor(self) -> np.ndarray:
@@ -100,12 +97,14 @@ def spectral_regulariser(name: Regulariser, basis: SpectralBasis) -> SpectralReg
     """The registered regulariser ``name`` on ``basis`` (module docstring)."""
     smooth = smoothness_gram(basis.B)
     if name == "smoothness":
-        return SpectralRegulariser(name, smooth, np.zeros(basis.n_components))
+        return SpectralRegulariser(name, smooth)
     if name == "training":
         stats = weight_statistics(basis, prior_reflectances(basis))
         precision = np.linalg.pinv(stats.cov, hermitian=True)
-        scale = TRAINING_STRENGTH * np.trace(smooth) / np.trace(precision)
-        return SpectralRegulariser(name, scale * precision, stats.mean)
+        precision *= TRAINING_STRENGTH * np.trace(smooth) / np.trace(precision)
+        towards_mean = precision @ stats.mean
+        shape = precision - np.outer(towards_mean, towards_mean) / (stats.mean @ towards_mean)
+        return SpectralRegulariser(name, (shape + shape.T) / 2)
     raise RigError(
         f"spectral regulariser {name!r} is unknown",
         f"use one of {', '.join(REGULARISERS)}",

@@ -9,9 +9,9 @@ Residual blocks (E = Σ r², the paper's cost with no ½):
   y_obs sampled bilinearly at the vertex's projection (disparity cue),
   k the rendering unit (``Weights.rendering_scale``) times the frame's noise weight
   (``Frames.weight``, below 1 where an ambient frame was subtracted);
-* spectral regulariser: ``sqrt(γ1) R_s (α_i − μ)`` with ``R_sᵀR_s`` and μ those of
+* spectral regulariser: ``sqrt(γ1) R_s α_i`` with ``R_sᵀR_s`` the matrix of
   ``Weights.spectral`` (:mod:`calibration.prior`: the training prior, or the paper's spectral
-  smoothness, eq. 14, ``R_sᵀR_s = (D B)ᵀ(D B)``, μ = 0, when none is given);
+  smoothness, eq. 14, ``R_sᵀR_s = (D B)ᵀ(D B)``, when none is given);
 * photometric smoothness (eq. 15): ``sqrt(2 γ2 w_ij) R_b (α_i − α_j)`` per undirected edge with
   ``R_bᵀR_b = BᵀB`` (the paper's double sum visits each edge twice);
 * geometric smoothness (eq. 16): ``sqrt(γ3) n_iᵀ(x_i − x̄_i) / l_i``: distance of the vertex to the
@@ -104,11 +104,8 @@ class JointCost:
         B = np.asarray(p.basis, dtype=float)
         self.B = B
         self.Q = np.einsum("knl,lb->knb", p.rig.responses, B)  # (K, 3, N_b)
-        spectral = p.weights.spectral or SpectralRegulariser(
-            "smoothness", smoothness_gram(B), np.zeros(B.shape[1])
-        )
+        spectral = p.weights.spectral or SpectralRegulariser("smoothness", smoothness_gram(B))
         self.R_s = spectral.factor
-        self.spectral_mean = np.asarray(spectral.mean, dtype=float)
         self.R_b = _r_factor(B)
         self.SS = self.R_s.T @ self.R_s
         self.BB = self.R_b.T @ self.R_b
@@ -299,7 +296,7 @@ class JointCost:
         diff = (A[e[:, 0]] - A[e[:, 1]]) @ self.R_b.T
         out = {
             "rendering": float(np.sum(rho * self.obs_weight**2)),
-            "spectral": self.gamma[0] * float(np.sum(((A - self.spectral_mean) @ self.R_s.T) ** 2)),
+            "spectral": self.gamma[0] * float(np.sum((A @ self.R_s.T) ** 2)),
             "photometric": float(np.sum((self.edge_sqrt[:, None] * diff) ** 2)),
             "geometric": float(np.sum(geo.rg**2)),
         }
@@ -317,7 +314,7 @@ class JointCost:
         return np.concatenate(
             [
                 (self.obs_weight[:, None] * state.error).ravel(),
-                (np.sqrt(self.gamma[0]) * (A - self.spectral_mean) @ self.R_s.T).ravel(),
+                (np.sqrt(self.gamma[0]) * A @ self.R_s.T).ravel(),
                 (self.edge_sqrt[:, None] * ((A[e[:, 0]] - A[e[:, 1]]) @ self.R_b.T)).ravel(),
                 geo.rg,
             ]

@@ -83,11 +83,9 @@ class Linearisation:
 
     def gradient(self) -> np.ndarray:
         """Jᵀr (half the gradient of E): the rendering rows lowered like a product's, the
-        smoothness terms' α rows at α − μ, the geometric rows ``J_gᵀ r_g``."""
+        smoothness terms' α rows at α itself, the geometric rows ``J_gᵀ r_g``."""
         geo, sx, _, sl = self.geometry, *self.cost.p.slices()
-        # the spectral term's rows at α − μ; the photometric Laplacian annuls the constant μ
-        offset = np.ascontiguousarray(self.A - self.cost.spectral_mean)
-        out = self._back(self.grad_u, offset, _NO_JDX)
+        out = self._back(self.grad_u, np.ascontiguousarray(self.A), _NO_JDX)
         if geo.jg is not None:
             out[sx] += geo.jg.T @ geo.rg
         out[sl] = self.light_grad.ravel()

@@ -99,8 +99,6 @@ def build_problem(
         cfg.sigma_intensity,
     )
     spectral = spectral_regulariser(cfg.spectral_prior, inp.basis)
-    if not np.isfinite(inp.reflectance_upper):  # a relative scale: no absolute mean either
-        spectral = spectral.scale_free()
     weights = Weights(cfg.gamma, e, w, edge_scale(X, adj), cfg.rendering_scale, spectral)
     return Problem(
         inp.faces, n, inp.basis.B, inp.rig, fr, obs, weights, problem_mode(cfg.light_mode)

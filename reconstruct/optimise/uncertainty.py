@@ -57,14 +57,14 @@ from reconstruct.optimise.cost import JointCost
 @dataclass
 class VertexUncertainty:
     reflectance_std: np.ndarray  # (N, N_λ); NaN for unobserved vertices
+    # the 95 % band within the physical range (N, N_λ) each; NaN for unobserved vertices
+    reflectance_low: np.ndarray
+    reflectance_high: np.ndarray
     position_std_m: np.ndarray  # (N,) along the normal; NaN where the position was not solved
     alpha_cov: np.ndarray  # (N, N_b, N_b) expected squared error of α̂; NaN for unobserved
     noise_std: float  # per-channel image noise from the residuals, linear image units
     dof: int
     reflectance_std_gn: np.ndarray | None = None  # plain Gauss–Newton std (regularisers as prior)
-    # the 95 % band within the physical range (N, N_λ) each; NaN for unobserved vertices
-    reflectance_low: np.ndarray | None = None
-    reflectance_high: np.ndarray | None = None
 
     def summary(self) -> dict[str, float | int]:
         """Numbers for report.json."""
@@ -130,7 +130,7 @@ def vertex_uncertainty(
     B = cost.B
     gn_std = _spectral_std(B, cov[:, 1:, 1:])
     gx, ga, _ = p.unpack(lin.gradient())
-    reg_grad = cost.gamma[0] * (A - cost.spectral_mean) @ cost.SS + (cost.laplacian @ A) @ cost.BB
+    reg_grad = cost.gamma[0] * A @ cost.SS + (cost.laplacian @ A) @ cost.BB
     grad = np.zeros((n, 1 + nb))
     grad[:, 0] = np.where(fixed, 0.0, np.einsum("ij,ij->i", gx, normals))
     grad[:, 1:] = ga - reg_grad
@@ -144,13 +144,13 @@ def vertex_uncertainty(
     low, high = bounded_band(A @ B.T, std, 0.0, upper)
     return VertexUncertainty(
         reflectance_std=std,
+        reflectance_low=low,
+        reflectance_high=high,
         position_std_m=pos,
         alpha_cov=cov[:, 1:, 1:],
         noise_std=float(np.sqrt(s2) / p.weights.rendering_scale),
         dof=dof,
         reflectance_std_gn=gn_std,
-        reflectance_low=low,
-        reflectance_high=high,
     )
 
 

@@ -245,16 +245,17 @@ def export_result(
     normals, _ = vertex_normals(result.vertices, result.faces)
     unc = result.uncertainty
     std = None if unc is None else unc.reflectance_std
-    band = None if unc is None or unc.reflectance_low is None else (
-        unc.reflectance_low, unc.reflectance_high
-    )
+    band = None if unc is None else (unc.reflectance_low, unc.reflectance_high)
     arrays = (
         {}
         if unc is None
-        else {"reflectance_std": unc.reflectance_std, "position_std_m": unc.position_std_m}
+        else {
+            "reflectance_std": unc.reflectance_std,
+            "reflectance_low": unc.reflectance_low,
+            "reflectance_high": unc.reflectance_high,
+            "position_std_m": unc.position_std_m,
+        }
     )
-    if band is not None:
-        arrays |= {"reflectance_low": band[0], "reflectance_high": band[1]}
     # the 2-D estimate the joint solve started from, for viewers comparing the two
     arrays["initial_reflectance"] = inp.basis.reconstruct(result.initial_alpha)
     ply_extra = (
