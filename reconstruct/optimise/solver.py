@@ -5,12 +5,10 @@ the factored JᵀJ of :class:`~reconstruct.optimise.cost.Linearisation`, precond
 exact diagonal blocks (per vertex [x, α], per light 3×3) — never forming J. Steps are accepted by
 the gain ratio and λ follows Nielsen's update. Parameters outside a stage's mask stay fixed.
 
-With reflectance bounds (projected Levenberg–Marquardt): a vertex whose spectrum ``B α`` sits
-on a bound that the descent direction pushes through moves only along that face (its α
-directions are projected in the CG solve), and a trial step that still takes a spectrum out
-is projected back in the metric of the vertex's damped α block — the minimiser of the
-vertex's own quadratic model within the bounds, which a Euclidean projection is not where the
-data constrain some basis directions far more than others.
+With reflectance bounds (projected Levenberg–Marquardt), a trial step that takes a vertex's
+spectrum ``B α`` out of them is projected back in the metric of the vertex's damped α block:
+the minimiser of the vertex's own quadratic model within the bounds, which a Euclidean
+projection is not where the data constrain some basis directions far more than others.
 """
 
 from __future__ import annotations
@@ -43,7 +41,6 @@ from reconstruct.optimise.linearisation import Linearisation
 
 _NO_DIRECTIONS = np.empty((0, 3))  # free motion
 _NO_DAMPING = np.empty(0)
-_AT_BOUND = 1e-6  # a sample this close to a reflectance bound is on it (ε-active)
 
 
 @dataclass
@@ -314,29 +311,19 @@ def _levenberg_marquardt(
         if not np.any(g):
             reason = "zero gradient"
             break
-        # Spectra at a bound the gradient pushes them through move only along it: their
-        # α steps are projected onto the face (projected Newton, ε-active set).
-        face = (
-            None if reflectance_bounds is None else _bound_faces(cost, theta, g, reflectance_bounds)
-        )
-        rhs = -g if face is None else face(-g)
         pre = ArrowheadPreconditioner(lin, blocks, lam, scale, mask, directions)
-        precondition = pre if face is None else lambda v, pre=pre, face=face: face(pre(v))
 
         # CG's vectors stay in the stage's subspace (its right-hand side and the
         # preconditioner's output are projected), so only the product leaves it.
         def op(
-            v: np.ndarray,
-            lin: Linearisation = lin,
-            damping: np.ndarray = lam * scale,
-            face: Callable[[np.ndarray], np.ndarray] | None = face,
+            v: np.ndarray, lin: Linearisation = lin, damping: np.ndarray = lam * scale
         ) -> np.ndarray:
             out = lin.matvec(v)
             project_to_stage(out, damping, v, mask, along)
-            return out if face is None else face(out)
+            return out
 
-        delta, cg_it = _pcg(op, rhs, precondition, cfg.cg_tolerance, cfg.cg_max_iterations)
-        del pre, op, precondition  # rebuilt next iteration; not held beside the trial render
+        delta, cg_it = _pcg(op, -g, pre, cfg.cg_tolerance, cfg.cg_max_iterations)
+        del pre, op  # rebuilt next iteration; not held beside the trial render
         gd, dhd = float(g @ delta), float(delta @ lin.matvec(delta))
         # A step the model over-trusted is first shortened along the same direction (a
         # `terms` evaluation each) before λ grows and CG solves again: rejected steps are
@@ -404,38 +391,6 @@ def _diagonal(cost: JointCost, vert: np.ndarray, light: np.ndarray) -> np.ndarra
     d = np.diagonal(vert, axis1=1, axis2=2)
     dl = np.diagonal(light, axis1=1, axis2=2)
     return p.pack(d[:, :3], d[:, 3:], dl)
-
-
-def _bound_faces(
-    cost: JointCost, theta: np.ndarray, g: np.ndarray, bounds: tuple[float, float]
-) -> Callable[[np.ndarray], np.ndarray] | None:
-    """The projection of a vector's α parts onto the faces of the bounds that bind at θ: for each
-    vertex the wavelengths within ``_AT_BOUND`` of a bound whose descent direction (−g) points
-    out of it, ``P = I − A⁺A`` with A those rows of B. None when nothing binds.
-
-    Without it the step moves such a vertex's α out and the light and its neighbours with it;
-    the projection back then cancels the α part only, and the rest is no longer a descent."""
-    p = cost.p
-    n, nb = p.n_vertices, p.n_basis
-    sa = p.slices()[1]
-    A = theta[sa].reshape(n, nb)
-    r = A @ cost.B.T
-    push = -g[sa].reshape(n, nb) @ cost.B.T  # how −g moves each sample
-    lower, upper = bounds
-    binds = ((r <= lower + _AT_BOUND) & (push < 0)) | ((r >= upper - _AT_BOUND) & (push > 0))
-    rows = np.flatnonzero(binds.any(axis=1))
-    if rows.size == 0:
-        return None
-    active = binds[rows, :, None] * cost.B[None]  # (R, N_λ, N_b): the binding rows of B
-    proj = np.eye(nb) - np.linalg.pinv(active) @ active
-    index = (sa.start + rows[:, None] * nb + np.arange(nb)).ravel()
-
-    def face(v: np.ndarray) -> np.ndarray:
-        out = v.copy()
-        out[index] = np.einsum("rij,rj->ri", proj, v[index].reshape(-1, nb)).ravel()
-        return out
-
-    return face
 
 
 def _within_bounds(
