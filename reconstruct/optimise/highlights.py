@@ -13,8 +13,8 @@ the pair's diffuse colours: a wrong normal or light scales all K alike) and a ne
 exceeds ``tolerance`` × the diffuse value plus three noise spreads (the robust spread of what
 the split leaves, over all pairs), an allowance that grows away from the mirror direction.
 Only surface colours tell the two parts apart: on a grey surface, whose diffuse colours are
-the lamps' own, a shading error is neutral too, so a deficit counts as an excess does — the
-model's symmetric errors are trimmed on both sides, and the reflectance keeps no bias.
+the lamps' own, a shading error is neutral too, so a deficit counts as an excess does: the
+model's errors, of either sign, are trimmed on both sides instead of darkening grey surfaces.
 """
 
 from __future__ import annotations
