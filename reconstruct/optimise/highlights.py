@@ -61,8 +61,9 @@ def neutral_excess(
     n_vertices: int,
     tolerance: float,
 ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Per (vertex, view) pair: the neutral excess over the diffuse value and the diffuse
-    value (image units, norms over the pair's K × 3 values, (P,) each), and the noise per value.
+    """Per (vertex, view) pair: the neutral part of its difference from the diffuse value
+    (signed) and the diffuse value (image units, norms over the pair's K × 3 values, (P,)
+    each), and the noise per value.
 
     ``pair`` (M,) numbers the observations' pairs 0..P−1; ``shading`` (M,) > 0; ``white``
     (K, 3) the lamps' white responses ``Cᵀ L_k 1``. The excess e is split as ``a d + h v``
@@ -117,8 +118,7 @@ def highlight_weights(
     ``1 + (θ_h / lobe_angle)⁴`` with the angle θ_h (radians, ``half_angle`` (M,)) between the
     normal and the half-vector of light and camera: a lobe lies near the mirror direction, far
     from it an excess is a shading error. A deficit counts as an excess does, so shading errors
-    of a grey surface, whose split cannot take them out, are down-weighted on both sides and
-    leave its reflectance unbiased."""
+    of a grey surface, which the split cannot take out, are trimmed on both sides alike."""
     if pair.size == 0:
         return np.ones(0)
     excess, diffuse, noise = neutral_excess(
