@@ -8,7 +8,8 @@ Residual blocks (E = Σ r², the paper's cost with no ½):
   :mod:`reconstruct.model.forward`,
   y_obs sampled bilinearly at the vertex's projection (disparity cue),
   k the rendering unit (``Weights.rendering_scale``) times the frame's noise weight
-  (``Frames.weight``, below 1 where an ambient frame was subtracted);
+  (``Frames.weight``, below 1 where an ambient frame was subtracted) and its own factor
+  (``Weights.observation``, below 1 on highlights);
 * spectral regulariser: ``sqrt(γ1) R_s α_i`` with ``R_sᵀR_s`` the matrix of
   ``Weights.spectral`` (:mod:`calibration.prior`: the training prior, or the paper's spectral
   smoothness, eq. 14, ``R_sᵀR_s = (D B)ᵀ(D B)``, when none is given);
@@ -142,6 +143,8 @@ class JointCost:
         self.obs_weight = p.weights.rendering_scale / np.sqrt(np.maximum(o.per_vertex[o.vertex], 1))
         if p.frames.weight is not None:  # noisier (ambient-subtracted) frames count less
             self.obs_weight = self.obs_weight * np.asarray(p.frames.weight, dtype=float)[o.frame]
+        if p.weights.observation is not None:  # highlights count less
+            self.obs_weight = self.obs_weight * p.weights.observation
         self.light_maps = p.light_maps()  # ∂p_c/∂θ_light (N_views, 3, 3)
         # (vertex, view) pairs: the geometry of one pair is shared by that view's frames.
         ps = o.pair_start

@@ -112,15 +112,18 @@ class Observations:
 @dataclass
 class Weights:
     """γ = (spectral, photometric, geometric) weights, per-edge photometric weights w_ij
-    (edges (E, 2), i < j), the per-vertex geometric scale l_i (metres), and the unit of the
+    (edges (E, 2), i < j), the per-vertex geometric scale l_i (metres), the unit of the
     rendering term: image values are multiplied by ``rendering_scale`` before differencing
-    (255 = 8-bit units, the units the paper's γ were tuned in)."""
+    (255 = 8-bit units, the units the paper's γ were tuned in), and a factor per observation
+    on its rendering residual (M,) in the observations' order (highlights down-weighted,
+    :mod:`reconstruct.optimise.highlights`; None: all 1)."""
 
     gamma: tuple[float, float, float]
     edges: np.ndarray
     edge_weight: np.ndarray
     scale: np.ndarray
     rendering_scale: float = 1.0
+    observation: np.ndarray | None = None
     spectral: SpectralRegulariser | None = None  # what γ1 weighs; None: the paper's smoothness
 
 

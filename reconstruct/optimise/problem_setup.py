@@ -4,6 +4,8 @@ the reflectance a solve starts from."""
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from calibration.basis import SpectralBasis
@@ -13,11 +15,14 @@ from core.errors import RigError
 from reconstruct.model.forward import shading
 from reconstruct.model.raycast import RayCaster
 from reconstruct.optimise.cost import JointCost
+from reconstruct.optimise.highlights import half_angles, highlight_weights
 from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
 from reconstruct.optimise.problem import LightMode, Observations, Problem, Rig, Weights
 from reconstruct.optimise.sampling import sample_pairs, taps_valid
 from reconstruct.optimise.settings import OptimiseInput, OptimiseSettings, SettingsLightMode
 from reconstruct.optimise.weights import edge_scale, photometric_weights
+
+log = logging.getLogger(__name__)
 
 
 def problem_mode(mode: SettingsLightMode) -> LightMode:
@@ -98,8 +103,30 @@ def build_problem(
         cfg.sigma_chroma,
         cfg.sigma_intensity,
     )
+    highlight = None
+    if cfg.highlights and obs.count:
+        sel = np.flatnonzero(keep)[order]
+        highlight = highlight_weights(
+            np.repeat(np.arange(obs.pair_start.size), np.diff(np.r_[obs.pair_start, obs.count])),
+            obs.vertex,
+            obs.illumination,
+            observed[sel],
+            s[sel],
+            inp.rig.responses.sum(axis=2),
+            n,
+            cfg.highlight_tolerance,
+            half_angles(X[vertex[sel]], normals[vertex[sel]], P[view[sel]], centres[view[sel]]),
+            np.radians(cfg.highlight_lobe_deg),
+        )
+        log.info(
+            "highlights: %d of %d observations weigh below 1/2",
+            int(np.sum(highlight < 0.5)),
+            obs.count,
+        )
     spectral = spectral_regulariser(cfg.spectral_prior, inp.basis)
-    weights = Weights(cfg.gamma, e, w, edge_scale(X, adj), cfg.rendering_scale, spectral)
+    weights = Weights(
+        cfg.gamma, e, w, edge_scale(X, adj), cfg.rendering_scale, highlight, spectral
+    )
     return Problem(
         inp.faces, n, inp.basis.B, inp.rig, fr, obs, weights, problem_mode(cfg.light_mode)
     )
@@ -113,9 +140,10 @@ def initial_reflectance(
     upper: float = 1.0,
 ) -> np.ndarray:
     """α from the calibration module's 2-D estimate, per vertex, with the current shading:
-    each (vertex, illumination)'s observations are pooled by least squares into one RGB and a
-    shading weight; vertices never observed get the mean α. Reflectance within [0, ``upper``],
-    regularised as the problem's spectral term is."""
+    each (vertex, illumination)'s observations are pooled by least squares (each weighted by
+    its rendering factor, so highlights count less) into one RGB and a shading weight;
+    vertices never observed get the mean α. Reflectance within [0, ``upper``], regularised as
+    the problem's spectral term is."""
     cost = JointCost(problem)
     X, A, light = problem.unpack(theta)
     normals, _ = vertex_normals(X, problem.faces)
@@ -126,8 +154,9 @@ def initial_reflectance(
     n, k = problem.n_vertices, problem.rig.responses.shape[0]
     s2 = np.zeros((n, k))
     sy = np.zeros((n, k, 3))
-    np.add.at(s2, (o.vertex, o.illumination), s**2)
-    np.add.at(sy, (o.vertex, o.illumination), s[:, None] * y_obs)
+    w2 = np.ones(o.count) if problem.weights.observation is None else problem.weights.observation**2
+    np.add.at(s2, (o.vertex, o.illumination), w2 * s**2)
+    np.add.at(sy, (o.vertex, o.illumination), (w2 * s)[:, None] * y_obs)
     seen = s2 > 0
     root = np.sqrt(s2)
     rgb = np.full((n, k, 3), np.nan)

@@ -43,6 +43,15 @@ class OptimiseSettings:
     robust: Robust = "none"
     # linear image units: RGB error where the robust loss bends
     robust_scale: float = bounded(0.02, above=0.0, max=1e3)
+    # Gloss: observations whose difference from the vertex's diffuse value has the lamps' own
+    # colour (a neutral highlight) beyond ``highlight_tolerance`` × that value, near the mirror
+    # direction, are down-weighted in the rendering term and the starting estimate
+    # (reconstruct/optimise/highlights.py). Off: it costs colour on scenes without gloss
+    # (bench/README.md, "Real optics").
+    highlights: bool = False
+    highlight_tolerance: float = bounded(0.1, above=0.0, max=1e3)
+    # the lobe's reach: the allowance doubles at this angle between normal and half-vector
+    highlight_lobe_deg: float = bounded(25.0, above=0.0, max=180.0)
     outer_iterations: int = bounded(3, min=0, max=1000)
     light_iterations: int = bounded(15, min=0, max=10_000)
     # Each joint stage does most of its work in its first few steps; the shadow and

@@ -9,7 +9,7 @@ the capture or front-end stages, so the optimiser can be checked on its own agai
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import trimesh
@@ -184,6 +184,38 @@ def make_scene(
         observed,
         ambient_images,
     )
+
+
+def with_gloss(
+    scene: SyntheticScene, reflectance: float = 0.04, alpha: float = 0.2
+) -> SyntheticScene:
+    """The scene's vertex-level observations plus a neutral GGX lobe (normal-incidence Fresnel
+    ``reflectance``, roughness ``alpha``, no shadowing term) in each lamp's own colour: the
+    dichromatic model's highlight ``π F D / (4 cos θ_o |p − x|²) · Cᵀ L_k 1`` (the Lambertian
+    white's units, where y = cos θ_i / |p − x|² · Cᵀ L_k r)."""
+    X = scene.vertices
+    normals, _ = vertex_normals(X, scene.faces)
+    white = scene.rig.responses.sum(axis=2)
+    caster = RayCaster(X, scene.faces)
+    observed = scene.observed.copy()
+    for f in range(scene.frames.count):
+        pose = scene.rig.poses[scene.frames.view[f]]
+        light = pose.light_position(scene.light_offset)
+        lit = shading(X, normals, light) > 0
+        lit &= ~caster.occluded(X, light, 1e-5, normals)
+        to_light = light - X
+        dist2 = np.einsum("ij,ij->i", to_light, to_light)
+        to_eye = pose.center - X
+        to_eye /= np.linalg.norm(to_eye, axis=1, keepdims=True)
+        half = to_light / np.sqrt(dist2)[:, None] + to_eye
+        half /= np.linalg.norm(half, axis=1, keepdims=True)
+        cos_h = np.clip(np.einsum("ij,ij->i", normals, half), 1e-3, 1.0)
+        cos_o = np.clip(np.einsum("ij,ij->i", normals, to_eye), 1e-3, 1.0)
+        tan2 = (1.0 - cos_h**2) / cos_h**2
+        ggx = alpha**2 / (np.pi * cos_h**4 * (alpha**2 + tan2) ** 2)
+        lobe = np.pi * reflectance * ggx / (4.0 * cos_o * dist2)
+        observed[:, f] += (lit * lobe)[:, None] * white[scene.frames.illumination[f]]
+    return replace(scene, observed=observed)
 
 
 def perturb(scene: SyntheticScene, amplitude: float, seed: int = 1) -> np.ndarray:
