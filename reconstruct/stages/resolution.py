@@ -9,8 +9,8 @@ over their focal length):
 
 - the optimiser samples the level at which the target edge spans more than 1 and at most 2
   pixels (finer pixels add memory, not detail the mesh can hold);
-- PatchMatch matches at the level at which one pixel spans about one target edge (one depth
-  per vertex);
+- PatchMatch matches one level below the optimiser (a pixel per one to two target edges: its
+  points only seed the mesh that subdivision resamples to the target edge);
 - subdivision aims at the target edge in metres.
 
 The target edge is ``subdivide.target_px`` (2) pixels of the decoded frames unless
@@ -97,8 +97,8 @@ def optimise_steps(edge_px: float) -> int:
 
 
 def patchmatch_steps(edge_px: float) -> int:
-    """Halvings after which one pixel spans about ``edge_px`` pixels."""
-    return max(0, round(math.log2(edge_px)))
+    """Halvings after which one pixel spans one to two edges of ``edge_px`` pixels."""
+    return optimise_steps(edge_px) + 1
 
 
 def mm_per_px(intrinsics: Mapping[int, Intrinsics], poses: Mapping[int, Pose]) -> float:

@@ -39,15 +39,15 @@ from reconstruct.model.camera import CAMERA_MODELS, Intrinsics, Pose
 from reconstruct.model.raycast import RayCaster
 
 log = logging.getLogger("reconstruct.initial_mesh.dense")
-# one level below the frames: a pixel per target edge of 2 px (reconstruct.stages.resolution)
+# one level below the frames: the level reconstruct.stages.resolution picks at 1-2 px edges
 DEFAULT_SCALE = 0.5
 
 
 @dataclass(frozen=True)
 class PatchMatchConfig:
     """``scale``: image scale the depth maps are computed at, relative to the decoded frames
-    (unset: from ``resolution``, the level at which a pixel spans the target edge: 0.5 at
-    the default 2 px edge, :mod:`reconstruct.stages.resolution`); ``window`` samples per side,
+    (unset: from ``resolution``, one level below the optimiser's: 0.5 at edges of 1–2 px,
+    :mod:`reconstruct.stages.resolution`); ``window`` samples per side,
     ``window_step`` pixels apart; ``sources``: neighbouring views matched against, of which the
     ``top_k`` best count; ``depth_range``: search depth behind the visual hull, as a fraction
     of the hull's largest extent; ``min_texture``: a window's RMS after its intensity planes are

@@ -63,24 +63,26 @@ def test_full_size_when_no_cap() -> None:
 
 @pytest.mark.parametrize(
     ("edge_px", "optimise", "patchmatch"),
-    [(1.25, 0, 0), (2.0, 0, 1), (2.01, 1, 1), (3.0, 1, 2), (4.0, 1, 2), (8.0, 2, 3),
-     (0.5, 0, 0)],
+    [(1.25, 0, 1), (2.0, 0, 1), (2.01, 1, 2), (3.0, 1, 2), (4.0, 1, 2), (8.0, 2, 3),
+     (0.5, 0, 1)],
 )
 def test_stage_steps_from_the_target_edge(edge_px: float, optimise: int, patchmatch: int) -> None:
     assert optimise_steps(edge_px) == optimise
     assert patchmatch_steps(edge_px) == patchmatch
     spacing = edge_px / 2**optimise  # the edge in the optimiser's pixels
     assert spacing <= 2.0 and (spacing > 1.0 or optimise == 0)
+    assert patchmatch == optimise + 1  # a PatchMatch pixel per one to two edges
 
 
-def test_presets_keep_todays_stages_at_800x600() -> None:
-    """Level 0 frames, PatchMatch at half size, the optimiser at full size, 2 px edges."""
+@pytest.mark.parametrize("target_px", [1.25, 2.0])  # bench.real_size's and the default
+def test_presets_keep_todays_stages_at_800x600(target_px: float) -> None:
+    """Level 0 frames, PatchMatch at half size, the optimiser at full size."""
     for detail in MAX_SIDE:
-        levels = choose(ResolutionConfig(detail), frame_level(800, 600, MAX_SIDE[detail]),  # type: ignore[arg-type]
-                        2.0, 0.5)
+        level = frame_level(800, 600, MAX_SIDE[detail])
+        levels = choose(ResolutionConfig(detail), level, target_px, 0.5)  # type: ignore[arg-type]
         assert (levels.decode, levels.patchmatch, levels.optimise) == (0, 1, 0)
         assert levels.patchmatch_scale == 0.5 and levels.optimise_step == 0
-        assert levels.edge_mm == pytest.approx(1.0)
+        assert levels.edge_mm == pytest.approx(0.5 * target_px)
 
 
 def test_a_21mp_frame_works_two_levels_down_at_standard() -> None:
@@ -104,9 +106,9 @@ def test_an_edge_in_mm_chooses_the_levels_from_the_footprint() -> None:
     assert levels.edge_px == pytest.approx(4.0)
     assert (levels.decode, levels.patchmatch, levels.optimise) == (1, 3, 2)
     assert levels.patchmatch_scale == 0.25 and levels.optimise_step == 1
-    # finer than the decoded frames resolve: everything at their level
+    # finer than the decoded frames resolve: the optimiser at their level
     fine = choose(ResolutionConfig(edge_mm=0.1), 1, 2.0, footprint)
-    assert (fine.patchmatch, fine.optimise) == (1, 1)
+    assert (fine.patchmatch, fine.optimise) == (2, 1)
     # a PatchMatch scale named in the config is reported as its level
     assert choose(ResolutionConfig(), 0, 2.0, footprint, 0.25).patchmatch == 2
 
