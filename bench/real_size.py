@@ -17,6 +17,7 @@ same scene and start): the before/after of a change.
     python -m bench.real_size --quick                      # smoke size
     python -m bench.real_size --large --views 12           # 21 MP frames, 12 views
     python -m bench.real_size --views 12                   # its 800×600 reference
+    python -m bench.real_size --large --views 12 --detail draft --label draft
 """
 
 from __future__ import annotations
@@ -233,11 +234,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="smoke size (320×240, 8 views)")
     p.add_argument("--large", action="store_true", help="5600×3744 frames (21 MP)")
     p.add_argument("--views", type=int, default=None, help="views (default 40; 8 with --quick)")
+    p.add_argument("--detail", choices=("draft", "standard", "fine"), default=None,
+                   help="rig reconstruct --detail (default: its own, standard)")
     a = p.parse_args(argv)
     console = make_console()
     size = SIZES["quick" if a.quick else "large" if a.large else "full"]
     if a.views is not None:
         size = replace(size, views=a.views)
+    if a.detail is not None:
+        size = replace(size, config={**size.config, "resolution": {"detail": a.detail}})
     folder = "real_size" + ("_large" if a.large else "") + (
         f"_{size.views}v" if a.views is not None else "")
     out = a.out if a.quick else a.out / folder

@@ -82,11 +82,11 @@ class FrontResult:
 
     ``frames`` holds only the spectral observations: on projector sessions the Gray-code and
     reference frames are left out. ``light_positions`` (view -> world position, metres) comes
-    from the projector's recovered placements; ``levels``: each stage's pyramid level (the
-    optimiser samples ``frames`` reduced by ``levels.optimise_step``);
-    ``initial_light_positions`` is the same in the
+    from the projector's recovered placements; ``initial_light_positions`` is the same in the
     order of ``sorted(poses)`` when every posed view has one, and ``light_mode_hint`` is then
-    ``"free"`` (one near point light per view); both are None on bulb sessions.
+    ``"free"`` (one near point light per view); both are None on bulb sessions. ``levels``:
+    each stage's pyramid level (the optimiser samples ``frames`` ``levels.optimise_step``
+    levels down).
     """
 
     recon_dir: Path
@@ -141,9 +141,7 @@ def _mesh_config(conf: MeshConfig, session: Session, summary: PoseSummary) -> Me
     return conf if spec is None else replace(conf, board=spec.to_dict())
 
 
-def stage_levels(
-    conf: FrontConfig, decoded_dir: Path, posed: PoseSet
-) -> StageLevels:
+def stage_levels(conf: FrontConfig, decoded_dir: Path, posed: PoseSet) -> StageLevels:
     """Each stage's pyramid level from the decoded frames and the footprint of the poses."""
     level = min(f.level for f in DecodeIndex.load(decoded_dir).frames)
     metric = posed.summary.scale == "metric" and len(posed.poses) >= 2
