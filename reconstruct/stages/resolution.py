@@ -11,12 +11,13 @@ over their focal length):
   pixels (finer pixels add memory, not detail the mesh can hold);
 - PatchMatch matches one level below the optimiser (a pixel per one to two target edges: its
   points only seed the mesh that subdivision resamples to the target edge);
-- subdivision aims at the target edge in metres.
+- subdivision aims at the target edge.
 
 The target edge is ``subdivide.target_px`` (2) pixels of the decoded frames unless
-``edge_mm`` gives it. Frames no larger than the preset (800×600 at every preset) stay at
-level 0 and the stages work as they always did: PatchMatch at half size, the optimiser at full
-size, edges of 2 px.
+``edge_mm`` gives it in millimetres (then the footprint turns it into pixels, and
+subdivision aims at it in metres). Frames no larger than the preset (800×600 at every
+preset) stay at level 0 and the stages work as they always did: PatchMatch at half size, the
+optimiser at full size, edges of 2 px.
 """
 
 from __future__ import annotations
