@@ -39,7 +39,9 @@ from core.files import atomic_output, write_bytes_atomically
 from core.manifest import MANIFEST_FILE, FrameRecord, verify_frames
 from core.manifest_check import check_session
 from core.session import Session
+from reconstruct.frames.pyramid import resize_area, resize_mask
 from reconstruct.frames.raw import read_linear_rgb
+from reconstruct.stages.resolution import frame_level, level_size
 from reconstruct.stages.resumable import STAMP, run_stage
 
 log = logging.getLogger("reconstruct.frames.decode")
@@ -80,6 +82,7 @@ class DecodedFrame:
     width: int
     saturated_fraction: float
     extra: dict[str, Any] = field(default_factory=dict)
+    level: int = 0  # pyramid level: the RAW frame halved this many times
 
 
 @dataclass
@@ -146,16 +149,68 @@ def load_frame(out_dir: Path, frame: DecodedFrame) -> tuple[np.ndarray, np.ndarr
 
 
 def decode_raw(path: Path, demosaic: str, saturation: float) -> tuple[np.ndarray, np.ndarray]:
-    """RAW file -> ((raw - black) / (white - black) in camera RGB, saturation mask)."""
-    mosaic, rgb = read_linear_rgb(path, demosaic)
+    """RAW file -> ((raw - black) / (white - black) in camera RGB, saturation mask) at full
+    size."""
+    rgb, mask, _ = decode_raw_level(path, demosaic, saturation)
+    return rgb, mask
+
+
+def decode_raw_level(
+    path: Path, demosaic: str, saturation: float, max_side: int = 0
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """RAW file -> ((raw - black) / (white - black) in camera RGB, saturation mask, level), at
+    the finest pyramid level whose long side is at most ``max_side`` (0: full size). Below
+    full size LibRaw's half-size output (one pixel per 2×2 block: its red and blue samples
+    sit a quarter of a level-1 pixel off the centre, the greens are averaged) is area-averaged
+    on to the level."""
+    level = 0
+
+    def half(width: int, height: int) -> bool:
+        nonlocal level
+        level = frame_level(width, height, max_side)
+        return level > 0
+
+    mosaic, rgb = read_linear_rgb(path, demosaic, half)
     clipped = mosaic.clipped(saturation)
+    if level > 0:
+        # a half-size pixel is one 2×2 block, re-centred from its neighbours: unusable if any
+        # sample of its block or the blocks around it clipped
+        hh, hw = rgb.shape[:2]
+        blocks = np.zeros((2 * hh, 2 * hw), bool)
+        h, w = min(clipped.shape[0], 2 * hh), min(clipped.shape[1], 2 * hw)
+        blocks[:h, :w] = clipped[:h, :w]
+        near = maximum_filter(np.any(blocks.reshape(hh, 2, hw, 2), axis=(1, 3)), size=3)
+        size = level_size(clipped.shape[1], clipped.shape[0], level)
+        rgb = centre_half_size(rgb, mosaic.pattern, mosaic.colour_desc)
+        return resize_area(rgb, size), resize_mask(near, size), level
     # the demosaic reads a neighbourhood: a pixel is unusable if any sample near it clipped
     radius = 1 if demosaic == "linear" else 2
     mask = maximum_filter(clipped, size=2 * radius + 1)
     if mask.shape != rgb.shape[:2]:
         size = (int(rgb.shape[1]), int(rgb.shape[0]))
         mask = cv2.resize(mask.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
-    return rgb, mask
+    return rgb, mask, 0
+
+
+def centre_half_size(rgb: np.ndarray, pattern: np.ndarray | None, desc: str) -> np.ndarray:
+    """LibRaw's half-size image with every channel at its pixel's centre: a channel's samples
+    sit where the 2×2 colour-filter pattern puts them (red and blue a quarter pixel off,
+    diagonally; the greens' mean at the centre), so each is shifted there bilinearly."""
+    if pattern is None or pattern.shape != (2, 2):
+        return rgb
+    out = np.empty_like(rgb)
+    channel = {"R": 0, "G": 1, "B": 2}
+    for c in range(3):
+        rows, cols = np.nonzero(np.isin(pattern, [i for i, n in enumerate(desc)
+                                                  if channel.get(n) == c]))
+        # sample at half-size coordinate (r + 0.5) / 2 of its block; the centre is 0.5
+        dy, dx = rows.mean() / 2 - 0.25, cols.mean() / 2 - 0.25
+        out[..., c] = cv2.warpAffine(
+            np.ascontiguousarray(rgb[..., c]), np.array([[1.0, 0, -dx], [0, 1.0, -dy]]),
+            rgb.shape[1::-1], flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+            borderMode=cv2.BORDER_REPLICATE,
+        )
+    return out
 
 
 def decode_linear(
@@ -209,23 +264,28 @@ def _decode_one(
     record: FrameRecord,
     conf: DecodeConfig,
     flat: FlatFieldDivider | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
+    max_side: int = 0,
+) -> tuple[np.ndarray, np.ndarray, int]:
     path = session.root / record.path
     if path.suffix.lower() in LINEAR_SUFFIXES:
         rgb, mask = decode_linear(path, record, conf.saturation)
+        height, width = mask.shape
+        level = frame_level(width, height, max_side)
+        size = level_size(width, height, level)
+        rgb, mask = resize_area(rgb, size), resize_mask(mask, size)
     else:
-        rgb, mask = decode_raw(path, conf.demosaic, conf.saturation)
+        rgb, mask, level = decode_raw_level(path, conf.demosaic, conf.saturation, max_side)
     if record.exposure_s <= 0 or record.iso <= 0:
         raise ValueError(f"exposure_s={record.exposure_s} and iso={record.iso} must be positive")
     rgb /= record.exposure_s * record.iso / 100.0
     if flat is not None:
         try:
-            rgb = flat(rgb)
+            rgb = flat(rgb)  # the gain map is smooth: dividing after the reduction is the same
         except RigError as error:  # a frame of another size: that frame, not the session
             raise ValueError(error.problem) from error
     if not np.all(np.isfinite(rgb)):
         raise ValueError("decoded values are not finite")
-    return rgb, mask
+    return rgb, mask, level
 
 
 def tone_map(images: list[np.ndarray], max_side: int = 0) -> list[np.ndarray]:
@@ -268,7 +328,8 @@ def _bad(conf: DecodeConfig, bad: dict[str, str]) -> None:
 
 
 def _decode(
-    session: Session, conf: DecodeConfig, out_dir: Path, flat: FlatFieldDivider | None
+    session: Session, conf: DecodeConfig, out_dir: Path, flat: FlatFieldDivider | None,
+    max_side: int,
 ) -> None:
     if not session.frames:
         raise RigError(f"{session.root} has no frames in its manifest", "capture a session first")
@@ -281,7 +342,7 @@ def _decode(
         [r for r in session.frames if r.path not in bad], description="decoding frames"
     ):
         try:
-            rgb, mask = _decode_one(session, record, conf, flat)
+            rgb, mask, level = _decode_one(session, record, conf, flat, max_side)
         except (rawpy.LibRawError, OSError, ValueError) as exc:
             bad[record.path] = f"cannot be decoded: {exc}"
             _bad(conf, {record.path: bad[record.path]})
@@ -308,6 +369,7 @@ def _decode(
                 rgb.shape[1],
                 float(mask.mean()),
                 dict(record.extra),
+                level,
             )
         )
         score = _sfm_score(record.illumination, rgb, conf)
@@ -332,9 +394,13 @@ def _sfm_score(illumination: str, rgb: np.ndarray, conf: DecodeConfig) -> float:
     return float(np.mean(rgb))
 
 
-def run(conf: DecodeConfig | Mapping[str, Any], session: Session | Path, out_dir: Path) -> Path:
+def run(
+    conf: DecodeConfig | Mapping[str, Any], session: Session | Path, out_dir: Path,
+    max_side: int = 0,
+) -> Path:
     """Decode every frame of the session (opened by the caller, or its folder) into
-    ``out_dir`` (resumable)."""
+    ``out_dir`` (resumable), each at the finest pyramid level whose long side is at most
+    ``max_side`` (0: full size; :mod:`reconstruct.stages.resolution`)."""
     conf = from_mapping(DecodeConfig, conf, "config", "decode")
     session = Session.of(session)
     root = session.root
@@ -342,6 +408,8 @@ def run(conf: DecodeConfig | Mapping[str, Any], session: Session | Path, out_dir
     check_session(root, session.frames, root / MANIFEST_FILE)
     flat, flat_files = session_flat_field(session)
     inputs = [root / MANIFEST_FILE, *flat_files] + [root / r.path for r in session.frames]
-    settings = {**asdict(conf), "flat_field": None if flat is None else flat.where}
-    run_stage("decode", settings, inputs, out_dir, lambda: _decode(session, conf, out_dir, flat))
+    settings = {**asdict(conf), "flat_field": None if flat is None else flat.where,
+                "max_side": max_side}
+    run_stage("decode", settings, inputs, out_dir,
+              lambda: _decode(session, conf, out_dir, flat, max_side))
     return out_dir

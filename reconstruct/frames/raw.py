@@ -10,6 +10,7 @@ is then exactly ``65535 (raw - black) / (white - black)``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -86,20 +87,28 @@ def read_mosaic(path: Path) -> RawMosaic:
         return _mosaic(raw)
 
 
-def read_linear_rgb(path: Path, demosaic: str) -> tuple[RawMosaic, np.ndarray]:
+def read_linear_rgb(
+    path: Path, demosaic: str, half_size: Callable[[int, int], bool] | None = None
+) -> tuple[RawMosaic, np.ndarray]:
     """The mosaic and LibRaw's demosaic of it (:func:`postprocess_linear`) as float32
-    ``(raw - black) / (white - black)`` in camera RGB (H, W, 3), from one opening of the file."""
+    ``(raw - black) / (white - black)`` in camera RGB (H, W, 3), from one opening of the file;
+    at half size (one pixel per 2×2 mosaic block) when ``half_size(width, height)`` of the
+    mosaic says so."""
     with rawpy.imread(str(path)) as raw:
         mosaic = _mosaic(raw)
-        rgb = postprocess_linear(raw, demosaic)
+        height, width = mosaic.values.shape
+        half = half_size is not None and half_size(width, height)
+        rgb = postprocess_linear(raw, demosaic, half)
     return mosaic, rgb.astype(np.float32) / 65535.0
 
 
-def postprocess_linear(raw: rawpy.RawPy, demosaic: str) -> np.ndarray:
+def postprocess_linear(raw: rawpy.RawPy, demosaic: str, half_size: bool = False) -> np.ndarray:
     """LibRaw's demosaic with nothing else: black subtracted, scaled so white = 65535, no white
     balance, no colour matrix, gamma 1, and a fixed maximum (``adjust_maximum_thr=0``) so the
-    gain never changes from shot to shot."""
+    gain never changes from shot to shot. ``half_size``: each 2×2 mosaic block becomes one
+    pixel (its samples, the two greens averaged; no interpolation, ~15× faster than AHD)."""
     return raw.postprocess(
+        half_size=half_size,
         demosaic_algorithm=DEMOSAIC[demosaic],
         use_camera_wb=False,
         use_auto_wb=False,

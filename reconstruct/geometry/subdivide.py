@@ -10,10 +10,12 @@ two) and boundary vertices stay fixed. This is simpler than Kobbelt's two-step b
 and keeps an open mesh's outline exactly where the initial mesh put it.
 
 The stage subdivides until the mean edge length is at most ``target_px`` pixels in the
-views (edge ≈ target_px · depth / focal, median over visible vertex-view pairs), then
-recomputes visibility on the final mesh. A mesh already finer than that (a dense MVS mesh
-from Poisson) is first coarsened to the target by quadric decimation (``decimate``): vertices
-closer than the images resolve add unknowns and memory to the joint optimisation, not detail.
+views (edge ≈ target_px · depth / focal, median over visible vertex-view pairs; the views'
+decoded frames, whose pyramid level :mod:`reconstruct.stages.resolution` chose) or a target
+edge given in metres, then recomputes visibility on the final mesh. A mesh already finer
+than that (a dense MVS mesh from Poisson) is first coarsened to the target by quadric
+decimation (``decimate``): vertices closer than the images resolve add unknowns and memory to
+the joint optimisation, not detail.
 Outputs in ``recon/subdivide/``: ``mesh.ply``, ``visibility.npz``, ``subdivide.json``.
 """
 
@@ -176,12 +178,12 @@ def subdivide(mesh: trimesh.Trimesh, steps: int) -> trimesh.Trimesh:
 
 def _subdivide(
     mesh_path: Path, vis_path: Path, posed: PoseSet, conf: SubdivideConfig,
-    vis_conf: VisibilityConfig, out_dir: Path,
+    vis_conf: VisibilityConfig, out_dir: Path, target_m: float | None,
 ) -> None:
     mesh = read_mesh(mesh_path, process=True)
     trimesh.repair.fix_winding(mesh)
     intrinsics, poses, _ = posed
-    target = target_edge_length(
+    target = target_m if target_m is not None else target_edge_length(
         Visibility.load(vis_path), {v: float(i.K[0, 0]) for v, i in intrinsics.items()},
         conf.target_px,
     )
@@ -218,16 +220,21 @@ def run(
     out_dir: Path,
     vis_conf: VisibilityConfig | Mapping[str, Any] | None = None,
     posed: PoseSet | None = None,
+    target_m: float | None = None,
 ) -> Path:
     """Subdivided mesh and its visibility into ``out_dir`` (resumable); returns the mesh.
-    ``posed``: the poses stage's output when the caller has loaded it."""
+    ``posed``: the poses stage's output when the caller has loaded it; ``target_m``: the
+    target edge in metres (instead of ``conf.target_px``)."""
     conf = from_mapping(SubdivideConfig, conf, "config", "subdivide")
     vconf = from_mapping(VisibilityConfig, vis_conf, "config", "visibility")
     inputs = [mesh_path, vis_path, poses_dir / "images.txt", poses_dir / "cameras.txt"]
+    settings = asdict(conf) | {"visibility": asdict(vconf)}
+    if target_m is not None:
+        settings["target_m"] = target_m
     run_stage(
-        "subdivide", asdict(conf) | {"visibility": asdict(vconf)}, inputs, out_dir,
+        "subdivide", settings, inputs, out_dir,
         lambda: _subdivide(
-            mesh_path, vis_path, posed or load_poses(poses_dir), conf, vconf, out_dir
+            mesh_path, vis_path, posed or load_poses(poses_dir), conf, vconf, out_dir, target_m
         ),
     )
     return out_dir / MESH

@@ -12,6 +12,7 @@ from core.session import Session
 from reconstruct.frames.decode import DecodeIndex
 from reconstruct.model.camera import Intrinsics, Pose, read_colmap_text
 from reconstruct.poses.output import PoseSummary
+from reconstruct.poses.sfm import rescale
 
 log = logging.getLogger("reconstruct.poses.known")
 
@@ -32,7 +33,8 @@ def view_of_name(name: str, session: Session) -> int | None:
 def known_poses(
     session: Session, decoded: DecodeIndex
 ) -> tuple[dict[int, tuple[Intrinsics, Pose]], PoseSummary]:
-    """The cameras of ``SESSION/poses/`` by view, in metres."""
+    """The cameras of ``SESSION/poses/`` by view, in metres, at the size of the view's decoded
+    frames (decode may store them at a coarser pyramid level than the camera's)."""
     cams, images = read_colmap_text(session.poses_dir)
     out: dict[int, tuple[Intrinsics, Pose]] = {}
     for cid, name, pose in images.values():
@@ -45,7 +47,9 @@ def known_poses(
                 f"{session.poses_dir / 'images.txt'}: image {name} uses camera {cid}, "
                 "which cameras.txt lacks", "add the camera or fix the id",
             )
-        out[view] = (cams[cid], pose)
+        frame = next((f for f in decoded.frames if f.view == view), None)
+        intr = cams[cid] if frame is None else rescale(cams[cid], frame.width, frame.height)
+        out[view] = (intr, pose)
     views = sorted(decoded.sfm_images)
     posed = sorted(set(out) & set(views))
     summary = PoseSummary(

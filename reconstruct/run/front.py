@@ -43,8 +43,15 @@ from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.poses import stage as poses
 from reconstruct.poses.board_sfm import session_board
 from reconstruct.poses.config import PosesConfig
-from reconstruct.poses.output import PoseSummary
+from reconstruct.poses.output import PoseSet, PoseSummary
 from reconstruct.poses.output import load as load_poses
+from reconstruct.stages.resolution import (
+    MAX_SIDE,
+    ResolutionConfig,
+    StageLevels,
+    choose,
+    mm_per_px,
+)
 from reconstruct.stages.resumable import attach_log_file
 
 log = logging.getLogger("reconstruct")
@@ -53,7 +60,7 @@ log = logging.getLogger("reconstruct")
 @dataclass(frozen=True)
 class FrontConfig:
     """Configuration of the five stages (each a section of the same name); ``procam`` replaces
-    ``mesh`` on projector sessions."""
+    ``mesh`` on projector sessions; ``resolution`` chooses each stage's pyramid level."""
 
     decode: DecodeConfig = field(default_factory=DecodeConfig)
     poses: PosesConfig = field(default_factory=PosesConfig)
@@ -61,6 +68,7 @@ class FrontConfig:
     visibility: VisibilityConfig = field(default_factory=VisibilityConfig)
     subdivide: SubdivideConfig = field(default_factory=SubdivideConfig)
     procam: ProcamConfig = field(default_factory=ProcamConfig)
+    resolution: ResolutionConfig = field(default_factory=ResolutionConfig)
 
     @classmethod
     def from_mapping(cls, data: Mapping[str, Any] | None, where: str = "config") -> FrontConfig:
@@ -76,7 +84,9 @@ class FrontResult:
     reference frames are left out. ``light_positions`` (view -> world position, metres) comes
     from the projector's recovered placements; ``initial_light_positions`` is the same in the
     order of ``sorted(poses)`` when every posed view has one, and ``light_mode_hint`` is then
-    ``"free"`` (one near point light per view); both are None on bulb sessions.
+    ``"free"`` (one near point light per view); both are None on bulb sessions. ``levels``:
+    each stage's pyramid level (the optimiser samples ``frames`` ``levels.optimise_step``
+    levels down).
     """
 
     recon_dir: Path
@@ -91,6 +101,7 @@ class FrontResult:
     visibility_path: Path
     visibility: Visibility
     skipped_frames: dict[str, str]  # frame path -> why it was left out
+    levels: StageLevels
     structured_light: bool = False
     light_positions: dict[int, np.ndarray] = field(default_factory=dict)
     initial_light_positions: np.ndarray | None = None
@@ -130,6 +141,27 @@ def _mesh_config(conf: MeshConfig, session: Session, summary: PoseSummary) -> Me
     return conf if spec is None else replace(conf, board=spec.to_dict())
 
 
+def stage_levels(conf: FrontConfig, decoded_dir: Path, posed: PoseSet) -> StageLevels:
+    """Each stage's pyramid level from the decoded frames and the footprint of the poses."""
+    level = min(f.level for f in DecodeIndex.load(decoded_dir).frames)
+    metric = posed.summary.scale == "metric" and len(posed.poses) >= 2
+    footprint = mm_per_px(posed.intrinsics, posed.poses) if metric else None
+    levels = choose(conf.resolution, level, conf.subdivide.target_px, footprint,
+                    conf.mesh.patchmatch.scale)
+    log.info("resolution %s: decoded frames at level %d, PatchMatch at %d, optimiser at %d, "
+             "target edge %.3g px%s", conf.resolution.detail, levels.decode, levels.patchmatch,
+             levels.optimise, levels.edge_px,
+             "" if levels.edge_mm is None else f" ({levels.edge_mm:.3g} mm)")
+    return levels
+
+
+def _patchmatch_scale(conf: MeshConfig, levels: StageLevels) -> MeshConfig:
+    """PatchMatch at the chosen level unless the config names its scale."""
+    if conf.patchmatch.scale is not None:
+        return conf
+    return replace(conf, patchmatch=replace(conf.patchmatch, scale=levels.patchmatch_scale))
+
+
 def run_front(
     session: Session | Path,
     conf: FrontConfig | Mapping[str, Any] | None = None,
@@ -152,10 +184,13 @@ def run_front(
             transient=True, disable=not get_console().is_terminal,  # no blank line in a log
         ) as progress:
             task = progress.add_task("reconstruct: decode", total=5)
-            decode.run(conf.decode, session, dirs["decoded"])
+            # Gray codes keep every pixel: their finest stripes are a pixel or two wide
+            max_side = 0 if projector else MAX_SIDE[conf.resolution.detail]
+            decode.run(conf.decode, session, dirs["decoded"], max_side)
             progress.update(task, advance=1, description="reconstruct: poses")
             poses.run(conf.poses, session, dirs["decoded"], dirs["poses"])
             posed = load_poses(dirs["poses"])
+            levels = stage_levels(conf, dirs["decoded"], posed)
             progress.update(task, advance=1, description="reconstruct: initial mesh")
             if projector and initial_mesh_file is None:
                 mesh0 = procam_initial_mesh(
@@ -164,7 +199,8 @@ def run_front(
                 )
             else:
                 mesh0 = initial_mesh.run(
-                    _mesh_config(conf.mesh, session, posed.summary), dirs["decoded"],
+                    _patchmatch_scale(_mesh_config(conf.mesh, session, posed.summary), levels),
+                    dirs["decoded"],
                     dirs["poses"], dirs["mesh"], initial_mesh_file, posed,
                 )
             progress.update(task, advance=1, description="reconstruct: visibility")
@@ -172,9 +208,10 @@ def run_front(
                 conf.visibility, mesh0, dirs["poses"], dirs["visibility"], posed
             )
             progress.update(task, advance=1, description="reconstruct: subdivide")
+            edge_mm = conf.resolution.edge_mm
             fine = subdivide.run(
                 conf.subdivide, mesh0, vis0, dirs["poses"], dirs["subdivide"], conf.visibility,
-                posed,
+                posed, None if edge_mm is None else edge_mm / 1e3,
             )
             progress.update(task, advance=1)
     finally:
@@ -195,7 +232,8 @@ def run_front(
     vis_path = dirs["subdivide"] / visibility.FILE
     result = FrontResult(
         recon, dirs["decoded"], intrinsics, pose_map, summary, frames, mesh0, fine,
-        read_mesh(fine), vis_path, Visibility.load(vis_path), dict(index.skipped), projector,
+        read_mesh(fine), vis_path, Visibility.load(vis_path), dict(index.skipped), levels,
+        projector,
     )
     if projector and (dirs["procam"] / LIGHTS).is_file():
         result.light_positions, result.initial_light_positions = _lights(pose_map, dirs["procam"])

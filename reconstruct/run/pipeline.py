@@ -2,7 +2,8 @@
 visibility → subdivide), the joint optimisation, and the files of ``SESSION/recon/``.
 
 Config (YAML, all optional): the front's sections ``decode``, ``poses``, ``mesh``,
-``procam``, ``visibility``, ``subdivide`` and ``optimise`` (:class:`OptimiseSettings`, with
+``procam``, ``visibility``, ``subdivide``, ``resolution`` (each stage's pyramid level,
+:mod:`reconstruct.stages.resolution`) and ``optimise`` (:class:`OptimiseSettings`, with
 ``solver``). On projector sessions the front recovers one light position per view; the
 optimiser then starts from them and, unless ``optimise.light_mode`` says otherwise, keeps them
 fixed (``fixed``) as the paper does.
@@ -15,6 +16,7 @@ loses at most the stage in progress and never leaves old and new outputs mixed.
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from collections.abc import Callable, Mapping
@@ -35,6 +37,7 @@ from core.session import Session
 from core.yamlio import read_yaml
 from reconstruct.frames.ambient import exposure_ratio, subtract_ambient
 from reconstruct.frames.decode import FLOAT16_RANGE, drop_frames, frame_bytes, load_frame
+from reconstruct.frames.pyramid import downsample, downsample_mask
 from reconstruct.model.camera import Intrinsics
 from reconstruct.model.raycast import RayCaster
 from reconstruct.optimise.checkpoint import FILE as CHECKPOINT_FILE
@@ -51,10 +54,11 @@ from reconstruct.run.status import RunStatus, tracked
 from reconstruct.stages.disk import stage_sizes_mb
 from reconstruct.stages.memory import peak_rss_mb, reset_peak_rss
 from reconstruct.stages.publish import publish, staging_dir
+from reconstruct.stages.resolution import level_size
 from reconstruct.stages.resumable import Timings, timed_run
 
 log = logging.getLogger("reconstruct")
-FRONT_SECTIONS = ("decode", "poses", "mesh", "procam", "visibility", "subdivide")
+FRONT_SECTIONS = ("decode", "poses", "mesh", "procam", "visibility", "subdivide", "resolution")
 Progress = Callable[[str, IterationRecord], None]
 RECONSTRUCT = "rig reconstruct"  # what a refused command is told holds the session
 
@@ -145,8 +149,17 @@ def _scaled(intr: Intrinsics, width: int, height: int) -> Intrinsics:
 
 
 def lit_frame(front: FrontResult, key: tuple[int, str]) -> tuple[np.ndarray, np.ndarray, float]:
-    """A lit frame (image, saturation mask, noise weight), with the view's ambient frame
-    subtracted when the session has one (:mod:`reconstruct.frames.ambient`)."""
+    """A lit frame (image, saturation mask, noise weight) at the optimiser's level, with the
+    view's ambient frame subtracted when the session has one
+    (:mod:`reconstruct.frames.ambient`)."""
+    img, sat, weight = _lit_decoded(front, key)
+    steps = front.levels.optimise_step
+    return downsample(img, steps), downsample_mask(sat, steps), weight
+
+
+def _lit_decoded(
+    front: FrontResult, key: tuple[int, str]
+) -> tuple[np.ndarray, np.ndarray, float]:
     frame = front.frames[key]
     img, sat = load_frame(front.decoded_dir, frame)
     amb = front.frames.get((key[0], AMBIENT))
@@ -368,6 +381,29 @@ def intermediates(recon_dir: Path, keep: bool) -> dict[str, Any]:
             "left": round(total - frames, 1)}
 
 
+def resolution_report(front: FrontResult, inp: OptimiseInput) -> dict[str, Any]:
+    """The report's ``resolution``: the preset, each stage's pyramid level (0: the RAW
+    frame) and image size, and the mesh's target edge (pixels of the decoded frames, and
+    millimetres when the poses are metric)."""
+    levels = front.levels
+    frame = next(iter(front.frames.values()))
+    summary = json.loads((front.mesh_path.parent / "subdivide.json").read_text())
+    metric = front.scale_is_metric
+    sampled = inp.rig.intrinsics[0]
+    return {
+        "detail": levels.detail,
+        "levels": {"decode": levels.decode, "patchmatch": levels.patchmatch,
+                   "optimise": levels.optimise},
+        "sizes": {"decode": [frame.width, frame.height],
+                  "patchmatch": list(level_size(frame.width, frame.height,
+                                                levels.patchmatch - levels.decode)),
+                  "optimise": [sampled.width, sampled.height]},
+        "edge_px": levels.edge_px,
+        "edge_mm": summary["target_edge"] * 1e3 if metric else None,
+        "mm_per_px": levels.mm_per_px,
+    }
+
+
 # Below this ratio of the farthest to the nearest camera distance the light's distance on the
 # camera plate trades against the reflectance scale (all views see the same inverse-square
 # falloff; docs/usage-reconstruct.md).
@@ -497,6 +533,7 @@ def _run(
         "timings_s": {"front": t_front, "load_frames": t_load},
         "peak_rss_mb": peaks,
         "intermediates_mb": intermediates(recon, keep_intermediates),
+        "resolution": resolution_report(front, inp),
     }
     status.stage("export")
     staging = staging_dir(recon)

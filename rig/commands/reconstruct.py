@@ -5,10 +5,14 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from core.errors import RigError
 from core.text import printable
+from rig.cliargs import number
+
+# reconstruct.stages.resolution.MAX_SIDE's presets (kept equal by tests/rig/test_startup.py)
+DETAILS = ("draft", "standard", "fine")
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -36,6 +40,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="YAML with sections decode, poses, mesh, procam, visibility, subdivide, optimise",
     )
     parser.add_argument(
+        "--detail",
+        choices=DETAILS,
+        default=None,
+        help="working resolution: the decoded frames' long side at most 1000 (draft), 2000 "
+        "(standard, the default) or 4000 px (fine); each stage then works at the pyramid level "
+        "its target edge needs (config section `resolution`)",
+    )
+    parser.add_argument(
+        "--edge-mm",
+        type=number(float, above=0.0, max=1e4),
+        default=None,
+        help="the mesh's target edge in millimetres (metric poses only; default: 2 px of the "
+        "decoded frames); PatchMatch and the optimiser work at the levels it needs",
+    )
+    parser.add_argument(
         "--keep-intermediates",
         action=argparse.BooleanOptionalAction,
         default=False,
@@ -49,6 +68,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "interrupted) and exit",
     )
     parser.set_defaults(func=handle, stop_hint=stop_hint)
+
+
+def with_resolution(
+    config: dict[str, Any], detail: str | None, edge_mm: float | None
+) -> dict[str, Any]:
+    """The config with ``--detail`` / ``--edge-mm`` in its ``resolution`` section (the flags
+    win over the file)."""
+    flags = {k: v for k, v in (("detail", detail), ("edge_mm", edge_mm)) if v is not None}
+    if not flags:
+        return config
+    return {**config, "resolution": {**(config.get("resolution") or {}), **flags}}
 
 
 def stop_hint(args: argparse.Namespace) -> str:
@@ -72,6 +102,7 @@ def summary(console: Console, rec: Reconstruction) -> None:
         "reflectance scale", "absolute" if rec.report["reflectance_scale_absolute"] else "relative"
     )
     table.add_row("time", f"{sum(rec.report['timings_s'].values()):.1f} s")
+    table.add_row("resolution", resolution_line(rec.report["resolution"]))
     disk = rec.report["intermediates_mb"]
     deleted = disk["decoded_frames_deleted"]
     stages = ", ".join(f"{k} {v:.0f}" for k, v in disk["stages"].items() if v >= 0.5)
@@ -84,6 +115,20 @@ def summary(console: Console, rec: Reconstruction) -> None:
     for path in (rec.mesh_path, rec.reflectance_path, rec.report_path, *rec.plots):
         table.add_row(path.name, str(path))
     console.print(table)
+
+
+def resolution_line(res: dict[str, Any]) -> str:
+    """``standard: levels decode 2 (1404×936), PatchMatch 3 (702×468), optimiser 2 (…); edge
+    2 px = 0.37 mm`` (level 0: the RAW frame's size)."""
+    levels = ", ".join(
+        f"{name} {res['levels'][key]} ({res['sizes'][key][0]}×{res['sizes'][key][1]})"
+        for key, name in (("decode", "decode"), ("patchmatch", "PatchMatch"),
+                          ("optimise", "optimiser"))
+    )
+    edge = f"{res['edge_px']:.3g} px"
+    if res["edge_mm"] is not None:
+        edge += f" = {res['edge_mm']:.3g} mm"
+    return f"{res['detail']}: levels {levels}; edge {edge}"
 
 
 # Exit status of a reconstruction that finished without some unusable frames (corrupt or
@@ -114,7 +159,7 @@ def handle(args: argparse.Namespace) -> int:
     from rig.warmup import compile_kernels_once
 
     console = plain_console(stderr=True)
-    config = load_config(args.config)
+    config = with_resolution(load_config(args.config), args.detail, args.edge_mm)
     session = Session.open(args.session)  # a wrong path fails now, not after the warm-up
     compile_kernels_once(console)
     rec = run_logged(session, config, args.initial_mesh, args.verbose, console,

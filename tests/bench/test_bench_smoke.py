@@ -110,3 +110,7 @@ def test_real_size_bench(tmp_path: Path) -> None:
     assert printed_gb >= round(stage_gb, 2)
     assert 0 < run["score"]["accuracy_mm"] < 20 and 0 < run["score"]["rmse"] < 0.5
     assert (tmp_path / "runs" / "current" / "session" / "recon" / "mesh.ply").is_file()
+    # the levels each stage used (320×240 frames: all at full size, PatchMatch at half)
+    stages = data["tables"][1]
+    levels = stages["rows"][0][stages["columns"].index("levels")]
+    assert levels.startswith("decode 0 (320×240), patchmatch 1 (160×120), optimise 0 (320×240)")

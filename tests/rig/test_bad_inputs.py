@@ -186,6 +186,10 @@ CONFIGS = [
     Case("config-voxels-fraction", config("mesh: {voxels: 12.5}\n"), r"mesh.*voxels"),
     Case("config-section-scalar", config("visibility: 5\n"), r"visibility"),
     Case("config-stereo-unknown", config("mesh: {stereo: {nosuch: 1}}\n"), r"c\.yaml.*nosuch"),
+    Case("config-detail-word", config("resolution: {detail: huge}\n"),
+         r"c\.yaml.*resolution\.detail.*draft"),
+    Case("config-edge-negative", config("resolution: {edge_mm: -1}\n"),
+         r"c\.yaml.*resolution\.edge_mm"),
 ]
 
 
@@ -352,6 +356,10 @@ CALIBRATE = [
 COMMAND_LINE = [
     Case("cli-unknown-command", lambda tmp: ["reconstrct", str(tmp)], r"reconstrct"),
     Case("cli-unknown-flag", lambda tmp: ["reconstruct", str(tmp), "--fast"], r"--fast"),
+    Case("cli-detail-word", lambda tmp: ["reconstruct", str(tmp), "--detail", "ultra"],
+         r"--detail.*ultra.*draft"),
+    Case("cli-edge-zero", lambda tmp: ["reconstruct", str(tmp), "--edge-mm", "0"],
+         r"--edge-mm.*0"),
     Case("capture-out-a-file",
          lambda tmp: ["capture", "--profile", "sim", "--out", str(write(tmp / "f", "x")), "--yes"],
          r"--out .*f is an existing file"),

@@ -65,8 +65,9 @@ def test_session_info_loads_no_heavy_library(tmp_path: Path) -> None:
 def test_parser_constants_match_the_libraries_they_repeat() -> None:
     from calibration import defaults
     from reconstruct.poses.board import spec
+    from reconstruct.stages import resolution
     from rig import cliargs, profile, wizard
-    from rig.commands import board, view
+    from rig.commands import board, reconstruct, view
     from rig.view import colour
 
     assert board.PAPER_SIZES == tuple(spec.PAPER_SIZES_M)
@@ -76,3 +77,4 @@ def test_parser_constants_match_the_libraries_they_repeat() -> None:
     assert view.DEFAULT_ILLUMINANTS == colour.DEFAULT_ILLUMINANTS
     assert list(wizard.BUILTIN_CAMERAS) == defaults.camera_names()
     assert cliargs.MAX_VIEWS == profile.MAX_VIEWS
+    assert reconstruct.DETAILS == tuple(resolution.MAX_SIDE)

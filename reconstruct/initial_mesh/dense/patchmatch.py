@@ -39,11 +39,15 @@ from reconstruct.model.camera import CAMERA_MODELS, Intrinsics, Pose
 from reconstruct.model.raycast import RayCaster
 
 log = logging.getLogger("reconstruct.initial_mesh.dense")
+# one level below the frames: the level reconstruct.stages.resolution picks at 1-2 px edges
+DEFAULT_SCALE = 0.5
 
 
 @dataclass(frozen=True)
 class PatchMatchConfig:
-    """``scale``: image scale the depth maps are computed at; ``window`` samples per side,
+    """``scale``: image scale the depth maps are computed at, relative to the decoded frames
+    (unset: from ``resolution``, one level below the optimiser's: 0.5 at edges of 1–2 px,
+    :mod:`reconstruct.stages.resolution`); ``window`` samples per side,
     ``window_step`` pixels apart; ``sources``: neighbouring views matched against, of which the
     ``top_k`` best count; ``depth_range``: search depth behind the visual hull, as a fraction
     of the hull's largest extent; ``min_texture``: a window's RMS after its intensity planes are
@@ -53,7 +57,7 @@ class PatchMatchConfig:
     many pixels and relative depth; ``min_consistent``: views that must confirm a point;
     ``seed``: random hypotheses."""
 
-    scale: float = bounded(0.5, above=0.0, max=1.0)
+    scale: float | None = bounded(None, above=0.0, max=1.0)
     window: int = bounded(5, min=1, max=63)
     window_step: int = bounded(1, min=1, max=16)
     sources: int = bounded(4, min=1, max=64)
@@ -300,9 +304,10 @@ def patchmatch_points(
     views = sorted(v for v in masks if v in poses)
     srcs = source_views({v: poses[v] for v in views}, hull_vertices.mean(0), conf.sources)
     pinhole = {v: undistorted(images[v], masks[v], intrinsics[v]) for v in views}
-    small = {v: _resize(pinhole[v][0], conf.scale) for v in views}
-    small_masks = {v: _resize(pinhole[v][1].astype(np.float32), conf.scale) > 0.5 for v in views}
-    intr_s = {v: scaled(pinhole[v][2], conf.scale) for v in views}
+    scale = DEFAULT_SCALE if conf.scale is None else conf.scale
+    small = {v: _resize(pinhole[v][0], scale) for v in views}
+    small_masks = {v: _resize(pinhole[v][1].astype(np.float32), scale) > 0.5 for v in views}
+    intr_s = {v: scaled(pinhole[v][2], scale) for v in views}
     maps: dict[int, ViewDepth] = {}
     for i, v in enumerate(views):
         sources = [(small[o], intr_s[o], poses[o]) for o in srcs[v]]

@@ -148,7 +148,8 @@ def test_pipeline_subtracts_the_views_ambient_frame(tmp_path, pair):
         (0, "ambient"): _decoded(tmp_path, 0, "ambient", room.ambient_images[0] / 4, 0.125),
         (1, "LED1"): _decoded(tmp_path, 1, "LED1", room.frames.images[2], 0.5),
     }
-    front = SimpleNamespace(frames=frames, decoded_dir=tmp_path)
+    front = SimpleNamespace(frames=frames, decoded_dir=tmp_path,
+                            levels=SimpleNamespace(optimise_step=0))
     image, sat, weight = lit_frame(front, (0, "LED1"))  # type: ignore[arg-type]
     np.testing.assert_allclose(image, dark.frames.images[0], atol=1e-5)
     assert weight < 1.0 and not sat.any()
