@@ -5,9 +5,9 @@ basis ``r = B α``::
 
     minimise_α  Σ_k ‖y_pk − A_k B α‖²  +  λ αᵀ P α
 
-with the spectral regulariser P of :mod:`calibration.prior` (default: the training prior;
-``smoothness``: P = (D B)ᵀ(D B), D the second-difference operator of paper eq. 8). λ is
-*relative*:
+with the spectral regulariser P of :mod:`calibration.prior` (default ``smoothness``:
+P = (D B)ᵀ(D B), D the second-difference operator of paper eq. 8; or the ``training`` shape
+prior). λ is *relative*:
 ``λ = smoothness · tr(Σ_k (A_k B)ᵀ A_k B) / tr((D B)ᵀ D B)`` (every regulariser is expressed in
 the smoothness's units), so the same ``smoothness`` works whatever the units of the light and
 the exposure. Without per-pixel weights the normal equations are solved once for every pixel;
@@ -103,7 +103,7 @@ def estimate_reflectance(
     fit_scale: bool = False,
     shading: np.ndarray | None = None,
     bounds: Bounds = REFLECTANCE_BOUNDS,
-    regulariser: Regulariser | SpectralRegulariser = "training",
+    regulariser: Regulariser | SpectralRegulariser = "smoothness",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Reflectance per pixel from ``rgb`` (P, K, 3) under ``responses`` (K, 3, N_λ), the
     matrices :func:`response_matrices` builds.
@@ -198,7 +198,7 @@ def noise_free_estimate(
     responses: np.ndarray,
     basis: SpectralBasis,
     smoothness: float = DEFAULT_SMOOTHNESS,
-    regulariser: Regulariser | SpectralRegulariser = "training",
+    regulariser: Regulariser | SpectralRegulariser = "smoothness",
 ) -> np.ndarray:
     """The estimator's answer (P, N_λ) for reflectances (P, N_λ) seen with unit, known shading
     and no noise: the information floor of the illuminations and camera in ``responses``."""

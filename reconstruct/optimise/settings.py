@@ -32,9 +32,10 @@ class OptimiseSettings:
     # γ2 (photometric) is 4, not 2: where a thin part's normals end off, only the vertex's
     # neighbours can correct its mis-scaled reflectance (docs/architecture.md, Cost).
     gamma: tuple[float, float, float] = bounded((3.0, 4.0, 0.01), min=0.0, max=1e9)
-    # What γ1 weighs (calibration.prior): the training reflectances' Gaussian prior, or the
-    # paper's spectral smoothness (eq. 14), kept to reproduce the paper.
-    spectral_prior: Regulariser = "training"
+    # What γ1 weighs (calibration.prior): the paper's spectral smoothness (eq. 14), or the
+    # training reflectances' shape prior, which lowers the 2-D floor but not, yet, the joint
+    # solve's colour error (bench/README.md, spectral_prior).
+    spectral_prior: Regulariser = "smoothness"
     # The rendering term is evaluated in 8-bit units (image value × 255), as in the paper's
     # implementation: in 0..1 linear units the paper's γ over-regularise by 255² (the light
     # distance then trades against the reflectance scale; light z off by centimetres).

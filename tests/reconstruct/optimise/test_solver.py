@@ -68,7 +68,9 @@ def test_light_only_stage_recovers_the_offset_from_zero(scene: SyntheticScene) -
         JointCost(problem),
         theta,
         problem.mask(False, True, True),
-        SolverSettings(max_iterations=40),
+        # run to convergence: projected steps are rejected more often near the bounds, and the
+        # stall rule would end the stage a little short of it
+        SolverSettings(max_iterations=40, stall_tolerance=0.0),
         lambda rec: history.append(rec.terms["total"]),
         reflectance_bounds=(0.0, 1.0),  # as the pipeline's stages run
     )

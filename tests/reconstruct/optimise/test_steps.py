@@ -9,6 +9,7 @@ import trimesh
 
 from calibration.bounds import ROUND_OFF
 from reconstruct.optimise.mesh import adjacency, edges
+from reconstruct.optimise.problem_setup import build_problem, initial_reflectance
 from reconstruct.optimise.settings import OptimiseSettings
 from reconstruct.optimise.steps import optimise
 from reconstruct.optimise.synthetic import SyntheticScene, perturb
@@ -29,14 +30,16 @@ def test_joint_optimisation_refines_shape_and_finds_the_light(image_scene: Synth
     assert records[0].startswith("light") and records[-1].startswith("joint")
     stages = {h["stage"] for h in res.history}
     assert stages == {"light", "joint"}
-    err = np.sqrt(np.mean((res.reflectance - image_scene.reflectance)[res.observed] ** 2))
+    # the joint solve's spectra beat the paper's baseline, the per-vertex 2-D estimate on the
+    # initial mesh (unbounded, as in the paper; the bounded one is the solve's own start)
+    light0 = np.zeros((1, 3))
+    problem = build_problem(image_scene.input(start, images=True), start, light0, cfg)
+    theta = problem.pack(start, np.zeros_like(image_scene.alpha), light0)
+    paper = initial_reflectance(problem, theta, image_scene.basis, cfg.init_smoothness, np.inf)
+    seen = res.observed
+    err = np.sqrt(np.mean((res.reflectance - image_scene.reflectance)[seen] ** 2))
     err0 = np.sqrt(
-        np.mean(
-            (image_scene.basis.reconstruct(res.initial_alpha) - image_scene.reflectance)[
-                res.observed
-            ]
-            ** 2
-        )
+        np.mean((image_scene.basis.reconstruct(paper) - image_scene.reflectance)[seen] ** 2)
     )
     assert err < err0
 
