@@ -7,7 +7,7 @@ import pytest
 from scipy.optimize import minimize
 
 from calibration import defaults
-from calibration.basis import SpectralBasis, default_basis, pca_basis
+from calibration.basis import SpectralBasis, pca_basis
 from calibration.bounds import (
     ROUND_OFF,
     bounded_band,
@@ -16,20 +16,8 @@ from calibration.bounds import (
     project,
     violation,
 )
-from calibration.estimation import estimate_reflectance, response_matrices
+from calibration.estimation import estimate_reflectance
 from core.errors import RigError
-
-
-@pytest.fixture(scope="module")
-def basis() -> SpectralBasis:
-    return default_basis()
-
-
-@pytest.fixture(scope="module")
-def responses() -> np.ndarray:
-    ch = defaults.rgbcw_channel_spds()
-    spds = [defaults.illumination_spd(v, ch) for v in defaults.default_illuminations().values()]
-    return response_matrices(defaults.camera_sensitivity(), spds)
 
 
 def _value(x: np.ndarray, H: np.ndarray, f: np.ndarray) -> float:

@@ -6,21 +6,9 @@ import numpy as np
 import pytest
 
 from calibration import defaults
-from calibration.basis import SpectralBasis, default_basis
+from calibration.basis import SpectralBasis
 from calibration.estimation import estimate_reflectance, response_matrices
 from core.errors import RigError
-
-
-@pytest.fixture(scope="module")
-def basis() -> SpectralBasis:
-    return default_basis()
-
-
-@pytest.fixture(scope="module")
-def responses() -> np.ndarray:
-    ch = defaults.rgbcw_channel_spds()
-    spds = [defaults.illumination_spd(v, ch) for v in defaults.default_illuminations().values()]
-    return response_matrices(defaults.camera_sensitivity(), spds)
 
 
 def render(resp: np.ndarray, refl: np.ndarray) -> np.ndarray:

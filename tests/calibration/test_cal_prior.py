@@ -11,7 +11,7 @@ from bench.external import SCENES
 from bench.external_scene import camera_ssf, lamp_spd
 from bench.spectral_prior import munsell
 from calibration import defaults
-from calibration.basis import SpectralBasis, default_basis
+from calibration.basis import SpectralBasis
 from calibration.colour_difference import delta_e00, illuminant
 from calibration.estimation import estimate_reflectance, response_matrices
 from calibration.prior import (
@@ -20,11 +20,6 @@ from calibration.prior import (
     weight_statistics,
 )
 from core.errors import RigError
-
-
-@pytest.fixture(scope="module")
-def basis() -> SpectralBasis:
-    return default_basis()
 
 
 def test_training_prior_is_the_rawtoaces_shape_prior(basis: SpectralBasis) -> None:
@@ -56,14 +51,15 @@ def test_an_unknown_regulariser_names_the_choices(basis: SpectralBasis) -> None:
         spectral_regulariser("flat", basis)  # type: ignore[arg-type]
 
 
-def test_the_prior_treats_an_unknown_scale_alike(basis: SpectralBasis) -> None:
-    ch = defaults.rgbcw_channel_spds()
-    spds = [defaults.illumination_spd(v, ch) for v in defaults.default_illuminations().values()]
-    resp = response_matrices(defaults.camera_sensitivity(), spds)
+def test_the_prior_treats_an_unknown_scale_alike(
+    basis: SpectralBasis, responses: np.ndarray
+) -> None:
     _, refl = defaults.colorchecker_reflectances()
-    rgb = np.einsum("knl,pl->pkn", resp, refl)
-    _, one = estimate_reflectance(rgb, resp, basis, fit_scale=True)
-    _, seven = estimate_reflectance(7.0 * rgb, resp, basis, fit_scale=True)
+    rgb = np.einsum("knl,pl->pkn", responses, refl)
+    one, seven = (
+        estimate_reflectance(y, responses, basis, fit_scale=True, regulariser="training")[1]
+        for y in (rgb, 7.0 * rgb)
+    )
     np.testing.assert_allclose(one, seven, atol=1e-9)
 
 
