@@ -41,7 +41,9 @@ class OptimiseSettings:
     # distance then trades against the reflectance scale; light z off by centimetres).
     rendering_scale: float = bounded(255.0, above=0.0, max=1e9)
     light_mode: SettingsLightMode = "offset"
-    robust: Robust = "none"
+    # A Cauchy loss on each observation's RGB error: observations the model cannot explain
+    # (highlights, silhouette taps, shadow-edge misses) stop pulling shape, light and colour.
+    robust: Robust = "cauchy"
     # linear image units: RGB error where the robust loss bends
     robust_scale: float = bounded(0.02, above=0.0, max=1e3)
     # Gloss: observations whose difference from the vertex's diffuse value has the lamps' own

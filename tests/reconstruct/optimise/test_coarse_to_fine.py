@@ -69,7 +69,9 @@ def test_start_several_pixels_off_converges_only_coarse_to_fine() -> None:
     start = perturb(scene, 0.005)
     truth = trimesh.Trimesh(scene.vertices, scene.faces, process=False)
     before = np.mean(surface_distance(start, truth)[0])
+    # plain least squares: the disparity cue's reach, not the loss, is what is measured
     common = {"outer_iterations": 2, "light_iterations": 10, "joint_iterations": 10}
+    common["robust"] = "none"
     after = {}
     for blur in (0.0, 4.0):
         cfg = OptimiseSettings(**common, coarse_blur_px=blur)  # type: ignore[arg-type]
@@ -77,6 +79,6 @@ def test_start_several_pixels_off_converges_only_coarse_to_fine() -> None:
         after[blur] = np.mean(surface_distance(res.vertices, truth)[0])
         stages = [h["stage"] for h in res.history if h["iteration"] == 0]
         assert stages == ["light"] + ["coarse"] * (2 if blur else 0) + ["joint"] * 2
-    assert after[0.0] > 0.55 * before  # measured 0.72: stuck
-    assert after[4.0] < 0.45 * before
+    assert after[0.0] > 0.6 * before  # stuck
+    assert after[4.0] < 0.5 * before
     assert after[4.0] < 0.7 * after[0.0]
