@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
-from calibration.bounds import bounded_quadratic
+from calibration.bounds import ROUND_OFF, bounded_quadratic, violation
 from core.config import bounded
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.kernels.cg import cg_direction, cg_step, project_to_stage
@@ -408,16 +408,20 @@ def _within_bounds(
     n, nb = p.n_vertices, p.n_basis
     sa = p.slices()[1]
     a = trial[sa].reshape(n, nb)
-    metric = vert[:, 3:, 3:] + damping[sa].reshape(n, nb)[:, :, None] * np.eye(nb)
+    rows = np.flatnonzero(violation(a, cost.B, *bounds) > ROUND_OFF)
+    if rows.size == 0:
+        return trial
+    metric = vert[rows, 3:, 3:] + damping[sa].reshape(n, nb)[rows, :, None] * np.eye(nb)
     # a vertex no term constrains yet (no observation, no edge) still gets a definite metric
     metric += 1e-12 * np.trace(metric, axis1=1, axis2=2).max() * np.eye(nb)
     out = trial.copy()
-    out[sa] = bounded_quadratic(
+    inside = bounded_quadratic(
         metric,
-        np.einsum("nij,nj->ni", metric, a),
+        np.einsum("nij,nj->ni", metric, a[rows]),
         cost.B,
         *bounds,
-        start=theta[sa].reshape(n, nb),
-        unconstrained=a,
-    ).ravel()
+        start=theta[sa].reshape(n, nb)[rows],
+        unconstrained=a[rows],
+    )
+    out[sa.start + (rows[:, None] * nb + np.arange(nb)).ravel()] = inside.ravel()
     return out
