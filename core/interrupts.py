@@ -38,6 +38,7 @@ class Interrupted(KeyboardInterrupt):
 class _State:
     first: int | None = None  # the first signal since install()
     raising = False  # a command runs: the first signal raises Interrupted
+    stopped = False  # a command was stopped and said so: the rest is the interpreter's exit
 
 
 _state = _State()
@@ -56,6 +57,12 @@ def stop_line(signum: int, hint: str = "") -> str:
 def received() -> int | None:
     """The first signal since the handlers were installed, if any."""
     return _state.first
+
+
+def mark_stopped() -> None:
+    """The stop line is out: finalisers of objects the signal left half-built (a compiler's
+    handle, a socket) that fail from now to the exit are logged, not printed after it."""
+    _state.stopped = True
 
 
 def note(signum: int) -> None:
@@ -126,19 +133,38 @@ def _reraise_logged_stops() -> None:
 def _redeliver_unraisable_stops() -> None:
     """A stop raised inside a finaliser or weakref callback (run by the garbage collector
     anywhere) cannot propagate and would print "Exception ignored": send the signal again,
-    so it is raised once more outside the finaliser."""
+    so it is raised once more outside the finaliser. Any other failing finaliser while a stop
+    is under way goes to the log: the stop line stays the last thing on the terminal."""
     if getattr(sys.unraisablehook, "redelivers_stops", False):
         return
     previous = sys.unraisablehook
+    log = logging.getLogger("rig")
 
-    def hook(unraisable: Any) -> None:
-        if isinstance(unraisable.exc_value, Interrupted):
-            _state.first = None
+    # defaults, not globals: the hook also runs at interpreter exit, after module globals go
+    def hook(
+        unraisable: Any,
+        state: _State = _state,
+        stop: type[Interrupted] = Interrupted,
+        kill: Callable[[int, int], None] = os.kill,
+    ) -> None:
+        if isinstance(unraisable.exc_value, stop):
+            state.first = None
             # from another thread, a moment later: a signal raised here would be handled
             # inside this hook, where it cannot propagate either
-            again = threading.Timer(0.01, os.kill, (os.getpid(), unraisable.exc_value.signum))
+            again = threading.Timer(0.01, kill, (os.getpid(), unraisable.exc_value.signum))
             again.daemon = True
             again.start()
+            return
+        if state.first is not None or state.stopped:
+            try:
+                log.debug(
+                    "while stopping, ignored %s in %r",
+                    unraisable.exc_type.__name__,
+                    unraisable.object,
+                    exc_info=(unraisable.exc_type, unraisable.exc_value, unraisable.exc_traceback),
+                )
+            except Exception:  # logging already shut down at exit: nothing left to tell
+                pass
             return
         previous(unraisable)
 
@@ -153,6 +179,7 @@ def install(*, raising: bool = True) -> None:
     if not _in_main_thread():
         return
     _state.first = None
+    _state.stopped = False
     _state.raising = raising
     _set_handlers()
     _reraise_logged_stops()

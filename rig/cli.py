@@ -172,6 +172,7 @@ def _stopped(parsed: list[argparse.Namespace]) -> int:
         except Exception:  # the stop itself is what must be reported
             hint = ""
     print(printable(interrupts.stop_line(signum, hint)), file=sys.stderr, flush=True)
+    interrupts.mark_stopped()
     return interrupts.exit_status(signum)
 
 

@@ -220,3 +220,25 @@ def test_a_signal_sent_before_the_handlers_existed_is_taken_when_they_do() -> No
     )
     assert proc.returncode == 143, proc.stderr
     assert proc.stderr == f"{STOP_LINE} SIGTERM (exit 143)\n"
+
+
+def test_a_finaliser_the_stop_left_half_built_stays_off_the_terminal() -> None:
+    """llvmlite's handles, cut short mid-construction by the signal, fail in ``__del__`` as
+    the interpreter exits: the stop line stays the last line, the failure goes to the log."""
+    proc = python(
+        "import argparse, logging, os, signal, sys\n"
+        "from rig import cli\n"
+        "from rig.commands import session\n"
+        "class HalfBuilt:\n"
+        "    def __del__(self):\n"
+        "        raise AttributeError('no attribute _as_parameter_')\n"
+        "def command(args):\n"
+        "    global kept\n"
+        "    kept = HalfBuilt()  # collected only when the interpreter exits\n"
+        "    os.kill(os.getpid(), signal.SIGINT)\n"
+        "session.handle_info = command\n"
+        "sys.exit(cli.main(['session', 'info', 'x']))\n"
+    )
+    assert proc.returncode == 130, proc.stderr
+    one_stop_line(proc.stderr, "SIGINT", 130)
+    assert "Exception ignored" not in proc.stderr, proc.stderr
