@@ -7,6 +7,7 @@ initial mesh) and scored against the truth and against a per-vertex least-square
     python -m bench.external --size full             # 3 scenes, 800x600, 40 views
     python -m bench.external --size medium --scenes spot-stepped
     python -m bench.external --size medium --optics real   # 6 cm bulb, 4 % gloss, cos⁴
+    python -m bench.external --size medium --optics real-lens --flat-field  # fall-off calibrated
 
 Per scene: initial and final accuracy/completeness (mean, median, p90), spectral RMSE (mean,
 median, per ColorChecker patch), CIEDE2000 under D65 and A (per vertex mean/median/p90, per
@@ -308,6 +309,12 @@ def main(argv: list[str] | None = None) -> int:
         help="real optics rendered by Mitsuba: a 6 cm bulb, a 4 %% GGX gloss (alpha 0.2), "
         "cos^4 fall-off, a strong lens's fall-off, or all together (real, real-lens)",
     )
+    p.add_argument(
+        "--flat-field",
+        action="store_true",
+        help="calibrate the lens's fall-off first, with rig calibrate's flat-field step on white "
+        "cards Mitsuba renders through the same lens; decode divides by it",
+    )
     p.add_argument("--config", type=Path, default=None,
                    help="a reconstruction config (YAML) merged over the budget, e.g. "
                    "mesh: {method: patchmatch}")
@@ -319,6 +326,9 @@ def main(argv: list[str] | None = None) -> int:
     if a.optics != "ideal":
         size = replace(size, optics=PRESETS[a.optics])
         folder += f"-optics-{a.optics}"
+    if a.flat_field:
+        size = replace(size, flat_field=True)
+        folder += "-flat"
     names = a.scenes or (SMOKE_SCENES if a.size == "smoke" else tuple(SCENES))
     out = a.out / folder
     out.mkdir(parents=True, exist_ok=True)
@@ -335,12 +345,12 @@ def main(argv: list[str] | None = None) -> int:
         "external",
         out,
         tables(results),
-        {"size": a.size, "optics": a.optics, "results": results},
+        {"size": a.size, "optics": a.optics, "flat_field": a.flat_field, "results": results},
         machine_info(),
         notes=[
             f"{a.size}: {size.width}x{size.height}, {size.views} views, {size.spp} spp, "
             f"ambient {size.ambient} (frames {size.ambient_frames}), optics {a.optics} "
-            f"({size.optics}), optimiser budget {budget}, "
+            f"({size.optics}), flat field {a.flat_field}, optimiser budget {budget}, "
             f"config {a.config}; error maps under {out}/SCENE/"
         ],
     )

@@ -7,13 +7,17 @@ images with the measured lamp and camera spectra and hands the linear image to t
 camera's own exposure (shot + read noise, clipping, Bayer mosaic) and DNG writer. So
 ``rig reconstruct SESSION`` reads it exactly like a capture. Real optics (``Size.optics``):
 the renderer's bulb and gloss, and lens fall-off as a gain on the linear image before exposure.
+With ``Size.flat_field`` the fall-off is calibrated first as a user would: the wizard's own
+flat-field step photographs white cards that Mitsuba renders through the same lens, and the
+session's decode divides by the fitted flat field.
 """
 
 from __future__ import annotations
 
+import argparse
 import io
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +31,7 @@ from bench.external_scene import SceneSpec, camera_ssf, lamp_spd, load_mesh, pai
 from calibration.grid import DEFAULT_GRID
 from calibration.store import CalibrationStore
 from core.errors import RigError
+from drivers.protocols import WhiteCard
 from drivers.sim.camera import SimCamera, colour_matrix
 from drivers.sim.light import SimLight
 from drivers.sim.scene import Scene
@@ -36,6 +41,8 @@ from reconstruct.model import forward
 # mapped to its measured lamp SPD in the session's calibration store.
 _LEVELS = ({"c": 1.0}, {"w": 1.0}, {"r": 1.0, "g": 1.0, "b": 1.0})
 CAMERA_NAME = "external-camera"
+FLAT_FIELD_NAME = "external-lens"
+FLAT_FIELD_POSITIONS = 4  # the wizard's default
 
 
 @dataclass(frozen=True)
@@ -52,10 +59,12 @@ class Size:
     ambient: float = 0.0  # ambient level relative to the bulb (0: no room light)
     ambient_frames: bool = True  # with a room light: capture an ambient frame per view
     optics: Optics = IDEAL  # real-optics effects (default: ideal optics)
+    flat_field: bool = False  # calibrate the lens's fall-off with the wizard's flat-field step
 
 
 class ExternalCamera(SimCamera):
-    """The sim camera with its image formation replaced by Mitsuba's shading images."""
+    """The sim camera with its image formation replaced by Mitsuba's shading images: the
+    scene's patches carry the ColorChecker's reflectances, or ``reflectances`` (K, n)."""
 
     def __init__(
         self,
@@ -67,13 +76,17 @@ class ExternalCamera(SimCamera):
         ssf: np.ndarray,
         ambient: np.ndarray | None,
         seed: int,
+        reflectances: np.ndarray | None = None,
     ) -> None:
         super().__init__(scene, light, None, rig.sensor, seed)
         self.sensitivity = ssf
         self._color_matrix = colour_matrix(ssf)
         self.rig = rig
         self.renderer = renderer
-        _, chart = _chart()
+        self.lamps = dict(lamps)
+        # the profile switches lamp i with _LEVELS[i] (write_profile); the wizard sets levels
+        self._levels = {name: _LEVELS[i] for i, name in enumerate(lamps)}
+        chart = _chart()[1] if reflectances is None else np.atleast_2d(reflectances)
         chart = chart[: renderer.n_patches]
         if renderer.n_images > renderer.n_patches:  # the specular shading: neutral, white
             chart = np.vstack([chart, np.ones(chart.shape[1])])
@@ -88,21 +101,55 @@ class ExternalCamera(SimCamera):
         """Σ_k shading_k · Cᵀ diag(L) ρ_k for the lamp now on (and the ambient light)."""
         view = self.rig.view
         pose = self.rig.poses[view]
-        name = self.light.illumination
+        name = self._lamp()
         shape = (self.sensor.height, self.sensor.width, 3)
         image = np.zeros(shape)
         if name is not None:
-            if name not in self._patch_rgb:
-                raise RigError(f"external camera: illumination {name!r} has no measured lamp")
             shading = self.renderer.render(pose, self.rig.light_positions[view])
             image += compose(shading, self._patch_rgb[name])
-        elif self.light.levels:
-            raise RigError("external camera: set the light by illumination name")
         if self._ambient is not None:
             image += compose(self.renderer.render(pose, None), self._ambient)
         if self._gain is not None:  # lens fall-off: the sensor-side effect, after rendering
             image *= self._gain[..., None]
         return image
+
+
+    def _lamp(self) -> str | None:
+        """The measured lamp now on, by illumination name or by the levels that switch it."""
+        name = self.light.illumination
+        if name is None and any(self.light.levels.values()):
+            name = next((n for n, lv in self._levels.items() if lv == self.light.levels), None)
+            if name is None:
+                raise RigError(
+                    f"external camera: light levels {self.light.levels} switch no measured lamp"
+                )
+        if name is not None and name not in self._patch_rgb:
+            raise RigError(f"external camera: illumination {name!r} has no measured lamp")
+        return name
+
+    def white_card(self, position: int) -> WhiteCard:
+        """The sim rig's white card (its place, the light on the plate, this lens) rendered
+        by Mitsuba, matte whatever the object's gloss: the wizard's flat-field target."""
+        from drivers.sim.white_card import white_card
+
+        card = white_card(self.rig, position)
+        card_rig = card.camera.rig  # type: ignore[attr-defined]
+        scene = card_rig.scene
+        renderer = ShadingRenderer(
+            scene.vertices,
+            scene.faces,
+            np.zeros(len(scene.vertices), dtype=np.int64),
+            card_rig.intrinsics,
+            self.renderer.spp,
+            self.renderer.cache,
+            optics=replace(self.renderer.optics, gloss_reflectance=0.0),
+        )
+        white = scene.reflectance.mean(axis=0, keepdims=True)
+        camera = ExternalCamera(
+            scene, card_rig.light, card_rig, renderer, self.lamps, self.sensitivity, None,
+            self.seed, white,
+        )
+        return replace(card, camera=camera)
 
 
 def _chart() -> tuple[list[str], np.ndarray]:
@@ -124,7 +171,7 @@ def write_store(
 
 def write_profile(path: Path, spec: SceneSpec, size: Size, scene_dir: Path, store: Path) -> None:
     """A sim profile for the scene: plate light 10 cm right of the lens, the spec's
-    trajectory, the measured calibration, true poses."""
+    trajectory, the measured calibration (and flat field), true poses."""
     names = list(spec.lamps)
     profile = {
         "name": f"external-{spec.name}",
@@ -142,7 +189,11 @@ def write_profile(path: Path, spec: SceneSpec, size: Size, scene_dir: Path, stor
                 "distance_factors": list(spec.distance_factors),
             },
         },
-        "calibration": {"store": str(store), "camera": CAMERA_NAME},
+        "calibration": {
+            "store": str(store),
+            "camera": CAMERA_NAME,
+            **({"flat_field": FLAT_FIELD_NAME} if size.flat_field else {}),
+        },
         "poses": "known",
         "sim": {
             "scene": str(scene_dir),
@@ -215,6 +266,8 @@ def build_session(
         devices.names["camera"] = "external (Mitsuba 3)"
         return devices
 
+    if size.flat_field:
+        calibrate_flat_field(profile, store, open_rig, spec.seed)
     session = out / "session"
     run_capture(
         profile,
@@ -228,3 +281,26 @@ def build_session(
         f"lamps {', '.join(spec.lamps.values())}",
     )
     return session
+
+
+def calibrate_flat_field(
+    profile_path: Path, store: Path, open_rig: Callable[[Any, int, Any], Any], seed: int
+) -> None:
+    """`rig calibrate`'s flat-field step on the external camera's white cards, stored as the
+    profile's flat field."""
+    from rig.profile import load_profile
+    from rig.wizard.flat_field import measure_flat_field
+
+    profile = load_profile(profile_path)
+    devices = open_rig(profile, seed, None)
+    try:
+        flat = measure_flat_field(
+            argparse.Namespace(flat_field_positions=FLAT_FIELD_POSITIONS),
+            profile,
+            devices,
+            None,
+            Console(file=io.StringIO()),
+        )
+    finally:
+        devices.close()
+    CalibrationStore(store).add_flat_field(FLAT_FIELD_NAME, *flat)

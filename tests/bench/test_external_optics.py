@@ -210,3 +210,36 @@ def test_sessions_carry_the_gloss_and_the_falloff_into_their_raws(
     real = frames["real"][seen] / (real_gain * frames["ideal"])[seen]
     assert 1.0 < np.median(real) < 1.08
     assert np.percentile(real, 99) > 1.2
+
+
+def test_flat_field_step_on_rendered_white_cards_recovers_the_lens_and_decode_removes_it(
+    shared_data: Path, tmp_path: Path
+) -> None:
+    """`--flat-field`: the wizard's flat-field step photographs white cards Mitsuba renders
+    through the lens; the fitted gain is the lens's, the session names it, decode divides."""
+    from bench.external_scene import SceneSpec
+    from bench.external_session import FLAT_FIELD_NAME, Size, build_session
+    from calibration.store import CalibrationStore
+    from core.session import Session
+    from reconstruct.frames.decode import session_flat_field
+
+    spec = SceneSpec(
+        "smoke",
+        "spot.obj",
+        {"L1": "Sunwayfoto.LED.FL96.at.3000K", "L2": "Sunwayfoto.LED.FL96.at.5500K"},
+        "Nikon D700",
+        (0.8, 1.2),
+        (30.0,),
+    )
+    optics = PRESETS["lens"]
+    size = Size(width=64, height=48, focal_px=112.0, views=2, optics=optics, flat_field=True)
+    session_dir = build_session(spec, size, tmp_path, shared_data, tmp_path / "cache")
+    _, flat = CalibrationStore(tmp_path / "store").flat_field(FLAT_FIELD_NAME, None)
+    truth = falloff_gain(Intrinsics.pinhole(64, 48, 112.0), optics)
+    assert truth.min() < 0.6  # a strong lens: the corners at under 60 % of the centre
+    np.testing.assert_allclose(flat.gain(64, 48), np.repeat(truth[..., None], 3, 2), rtol=0.03)
+    session = Session.open(session_dir)
+    assert session.info.calibration.flat_field is not None
+    assert session.info.calibration.flat_field.entry == FLAT_FIELD_NAME
+    divider, files = session_flat_field(session)
+    assert divider is not None and files  # decode divides every frame by it
