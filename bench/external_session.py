@@ -170,15 +170,20 @@ def write_store(
 
 
 def write_profile(path: Path, spec: SceneSpec, size: Size, scene_dir: Path, store: Path) -> None:
-    """A sim profile for the scene: plate light 10 cm right of the lens, the spec's
-    trajectory, the measured calibration (and flat field), true poses."""
+    """A sim profile for the scene: plate light 10 cm right of the lens (and the bulb's
+    diameter), the spec's trajectory, the measured calibration (and flat field), true poses."""
     names = list(spec.lamps)
     profile = {
         "name": f"external-{spec.name}",
         "description": "external-renderer benchmark scene (Mitsuba 3)",
         "devices": {"light": {"driver": "sim"}, "camera": {"driver": "sim"}},
         "camera_settings": {"exposure_s": 1.0, "iso": 100},
-        "light_mount": {"type": "plate", "offset_m": [0.1, 0.0, 0.0]},
+        "light_mount": {
+            "type": "plate",
+            "offset_m": [0.1, 0.0, 0.0],
+            # the bulb's size, as its user would enter it (None: the point light rendered)
+            "diameter_m": 2 * size.optics.bulb_radius_m or None,
+        },
         "illuminations": {n: dict(_LEVELS[i]) for i, n in enumerate(names)},
         "plan": {
             "views": size.views,

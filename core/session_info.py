@@ -150,6 +150,7 @@ class SessionInfo:
     known_lengths: Mapping[str, float] = field(default_factory=dict)
     board: Mapping[str, Any] | None = None  # parsed by reconstruct.poses.board.BoardSpec
     light_offset_m: tuple[float, ...] | None = None  # light_mount.offset_m
+    light_diameter_m: float = 0.0  # light_mount.diameter_m (0: a point light)
     devices: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     poses: str | None = None  # folder of known poses (COLMAP text), relative to the session
     ground_truth: str | None = None  # sim sessions: folder of the true scene
@@ -189,6 +190,7 @@ class SessionInfo:
         if board is not None and not isinstance(board, Mapping):
             raise read.bad(board_key, board, "a mapping (the board: snippet of `rig board`)")
         offset = read.get("light_mount.offset_m")
+        diameter = read.get("light_mount.diameter_m")
         return cls(
             plan=_plan(read),
             calibration=_calibration(read),
@@ -199,6 +201,7 @@ class SessionInfo:
             light_offset_m=None if offset is None else read.numbers(
                 "light_mount.offset_m", offset, 3
             ),
+            light_diameter_m=0.0 if diameter is None else _diameter(read, diameter),
             devices=devices,
             poses=read.text("poses"),
             ground_truth=read.text("ground_truth"),
@@ -212,6 +215,13 @@ class SessionInfo:
             board_checks=_board_checks(read),
             software=read.mapping("software"),
         )
+
+
+def _diameter(read: _Reader, value: Any) -> float:
+    (diameter,) = read.numbers("light_mount.diameter_m", [value], 1)
+    if diameter < 0:
+        raise read.bad("light_mount.diameter_m", value, "a diameter in metres, 0 or more")
+    return diameter
 
 
 def _plan(read: _Reader) -> PlanInfo:

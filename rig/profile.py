@@ -101,10 +101,12 @@ class Plan:
 @dataclass(frozen=True)
 class LightMount:
     """``plate``: light rigidly on the camera plate at ``offset_m`` (camera frame, metres);
-    ``free``: a separate light per view."""
+    ``free``: a separate light per view. ``diameter_m``: the bulb's emitting diameter (its
+    diffuser, about 0.06 for an A19 bulb); None or 0: a point light."""
 
     type: Literal["plate", "free"] = "plate"
     offset_m: tuple[float, float, float] | None = bounded(None, min=-10, max=10)
+    diameter_m: float | None = bounded(None, min=0, max=2)
 
 
 @dataclass(frozen=True)

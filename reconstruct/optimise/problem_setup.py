@@ -1,6 +1,13 @@
 """The solve's problem at the current estimate: the observation set (visibility, image
 bounds, grazing angles, shadows by ray casting to the current lights), its frozen weights, and
-the reflectance a solve starts from."""
+the reflectance a solve starts from.
+
+A bulb with a size (``OptimiseInput.light_radius``) is a uniform Lambertian sphere, whose
+irradiance on a surface that sees all of it is exactly the point light's at its centre: the
+forward model holds wherever the whole bulb is above the surface's horizon and unoccluded. So
+observations that see only part of it (the bulb across their horizon, or in a penumbra: a ray
+to its centre or to one of :data:`BULB_RIM_RAYS` points on its rim blocked) are left out, as the
+point light's shadows are."""
 
 from __future__ import annotations
 
@@ -24,6 +31,8 @@ from reconstruct.optimise.weights import edge_scale, photometric_weights
 
 log = logging.getLogger(__name__)
 
+BULB_RIM_RAYS = 6  # shadow rays to the bulb's rim per observation, besides the one to its centre
+
 
 def problem_mode(mode: SettingsLightMode) -> LightMode:
     """How a solve parameterises the light: fixed lights are per-view positions kept out of
@@ -36,6 +45,36 @@ def light_positions(rig: Rig, mode: SettingsLightMode, light: np.ndarray) -> np.
     if mode != "offset":
         return light
     return np.stack([pose.light_position(light[0]) for pose in rig.poses])
+
+
+def rim_hidden(
+    caster: RayCaster,
+    points: np.ndarray,
+    centres: np.ndarray,
+    normals: np.ndarray,
+    radius: float,
+    eps: float,
+) -> np.ndarray:
+    """Whether any of :data:`BULB_RIM_RAYS` points on the rim of a bulb of ``radius`` at
+    ``centres``, as each point sees it (a circle across the line of sight), is hidden from it."""
+    sight = centres - points
+    sight /= np.linalg.norm(sight, axis=1, keepdims=True)
+    # any direction across the line of sight: the axis it is least aligned with, crossed
+    axis = np.eye(3)[np.argmin(np.abs(sight), axis=1)]
+    across = np.cross(sight, axis)
+    across /= np.linalg.norm(across, axis=1, keepdims=True)
+    other = np.cross(sight, across)
+    phi = 2.0 * np.pi * np.arange(BULB_RIM_RAYS) / BULB_RIM_RAYS
+    rim = centres[:, None] + radius * (
+        np.cos(phi)[None, :, None] * across[:, None] + np.sin(phi)[None, :, None] * other[:, None]
+    )
+    hidden = caster.occluded(
+        np.repeat(points, BULB_RIM_RAYS, axis=0),
+        rim.reshape(-1, 3),
+        eps,
+        np.repeat(normals, BULB_RIM_RAYS, axis=0),
+    )
+    return np.asarray(hidden.reshape(-1, BULB_RIM_RAYS).any(axis=1))
 
 
 def build_problem(
@@ -75,6 +114,8 @@ def build_problem(
             observed[idx] = sample_pairs(fr.images, frame[idx], np.arange(idx.size), uv, False)[0]
     s = shading(X[vertex], normals[vertex], P[view])
     keep &= s > 0
+    if inp.light_radius > 0:  # cos θ > r / d: the whole bulb above the horizon
+        keep &= s * np.linalg.norm(P[view] - X[vertex], axis=1) ** 3 > inp.light_radius
     centres = np.stack([pose.center for pose in inp.rig.poses])
     to_cam = centres[view] - X[vertex]
     cos_view = np.einsum("ij,ij->i", normals[vertex], to_cam) / np.linalg.norm(to_cam, axis=1)
@@ -83,7 +124,14 @@ def build_problem(
     pair = vertex * inp.rig.n_views + view
     upair, inverse = np.unique(pair[keep], return_inverse=True)
     pv, pc = upair // inp.rig.n_views, upair % inp.rig.n_views
-    blocked = RayCaster(X, inp.faces).occluded(X[pv], P[pc], cfg.shadow_eps, normals[pv])
+    caster = RayCaster(X, inp.faces)
+    blocked = caster.occluded(X[pv], P[pc], cfg.shadow_eps, normals[pv])
+    if inp.light_radius > 0:
+        open_ = np.flatnonzero(~blocked)
+        blocked[open_] = rim_hidden(
+            caster, X[pv[open_]], P[pc[open_]], normals[pv[open_]], inp.light_radius,
+            cfg.shadow_eps,
+        )
     lit = np.ones(vertex.size, dtype=bool)
     lit[np.flatnonzero(keep)] = ~blocked[inverse]
     keep &= lit

@@ -111,7 +111,8 @@ class OptimiseInput:
     ``frames.images`` (sampled at the projections) or, without images, from ``observed``
     (N, F, 3), NaN where not observed. ``reflectance_upper``: the reflectance's upper bound,
     1 where its scale is absolute, inf where the poses have no metric scale (the reflectance is
-    then known only up to a factor); its lower bound is always 0.
+    then known only up to a factor); its lower bound is always 0. ``light_radius``: the bulb's
+    radius in the poses' units (0: a point light; :mod:`.problem_setup` says what it changes).
     """
 
     vertices: np.ndarray
@@ -124,3 +125,4 @@ class OptimiseInput:
     initial_light: np.ndarray | None = None
     initial_alpha: np.ndarray | None = None
     reflectance_upper: float = 1.0
+    light_radius: float = 0.0

@@ -239,6 +239,8 @@ def optimiser_input(front: FrontResult, session: Session, basis: SpectralBasis) 
         # without a metric scale the light's distance, and with it the reflectance's scale, is
         # known only up to a factor: only the lower bound is physical
         reflectance_upper=1.0 if front.scale_is_metric else np.inf,
+        # the bulb's size is in metres: without a metric scale it cannot be placed in the scene
+        light_radius=session.info.light_diameter_m / 2 if front.scale_is_metric else 0.0,
     )
 
 

@@ -265,6 +265,7 @@ def _new_info(
             "offset_m": list(profile.light_mount.offset_m)
             if profile.light_mount.offset_m
             else None,
+            "diameter_m": profile.light_mount.diameter_m,
         },
         # reconstruct.poses.sfm reads the camera-centre distances as this list (metric scale)
         "known_distances": [pair.as_dict() for pair in profile.camera_pairs],

@@ -216,7 +216,8 @@ def test_flat_field_step_on_rendered_white_cards_recovers_the_lens_and_decode_re
     shared_data: Path, tmp_path: Path
 ) -> None:
     """`--flat-field`: the wizard's flat-field step photographs white cards Mitsuba renders
-    through the lens; the fitted gain is the lens's, the session names it, decode divides."""
+    through the lens (matte, under the scene's bulb); the fitted gain is the lens's, the
+    session names it, decode divides; the profile gives the bulb's size."""
     from bench.external_scene import SceneSpec
     from bench.external_session import FLAT_FIELD_NAME, Size, build_session
     from calibration.store import CalibrationStore
@@ -231,7 +232,7 @@ def test_flat_field_step_on_rendered_white_cards_recovers_the_lens_and_decode_re
         (0.8, 1.2),
         (30.0,),
     )
-    optics = PRESETS["lens"]
+    optics = PRESETS["real-lens"]
     size = Size(width=64, height=48, focal_px=112.0, views=2, optics=optics, flat_field=True)
     session_dir = build_session(spec, size, tmp_path, shared_data, tmp_path / "cache")
     _, flat = CalibrationStore(tmp_path / "store").flat_field(FLAT_FIELD_NAME, None)
@@ -243,3 +244,4 @@ def test_flat_field_step_on_rendered_white_cards_recovers_the_lens_and_decode_re
     assert session.info.calibration.flat_field.entry == FLAT_FIELD_NAME
     divider, files = session_flat_field(session)
     assert divider is not None and files  # decode divides every frame by it
+    assert session.info.light_diameter_m == pytest.approx(2 * optics.bulb_radius_m)

@@ -29,7 +29,7 @@ CAPTURED: dict[str, Any] = {
         "projector_size": None,
         "projector_placements": None,
     },
-    "light_mount": {"type": "plate", "offset_m": [0.05, 0, 0]},
+    "light_mount": {"type": "plate", "offset_m": [0.05, 0, 0], "diameter_m": 0.06},
     "known_distances": [{"views": [0, 2], "metres": 0.5}],
     "known_lengths": {"light_offset_m": 0.05},
     "calibration": {"store": "default", "snapshot": "calibration", "camera": "C",
@@ -48,7 +48,7 @@ def test_a_captured_session_yaml_reads_as_typed_fields() -> None:
     assert info.plan.views == 4 and info.plan.frames == 12
     assert info.plan.illuminations == ("LED1", "LED2")
     assert info.projector_size == (64, 48)  # no plan size: the projector's recorded one
-    assert info.light_offset_m == (0.05, 0.0, 0.0)
+    assert info.light_offset_m == (0.05, 0.0, 0.0) and info.light_diameter_m == 0.06
     assert info.known_distances == (KnownDistance((0, 2), 0.5),)
     assert info.calibration.camera == "C" and info.calibration.lights == {"LED1": "led-1"}
     assert info.board == {"squares": [5, 7]}  # from the profile snapshot
@@ -63,6 +63,7 @@ def test_an_empty_or_foreign_session_yaml_has_defaults() -> None:
         assert info.plan.views is None and info.plan.illuminations is None
         assert info.calibration.camera is None and info.known_distances == ()
         assert info.projector_size is None and info.light_offset_m is None
+        assert info.light_diameter_m == 0.0  # a point light
 
 
 def test_the_profile_snapshot_gives_intrinsics_and_camera_pairs() -> None:
@@ -85,6 +86,8 @@ def test_the_profile_snapshot_gives_intrinsics_and_camera_pairs() -> None:
         ({"plan": {"illuminations": "LED1"}}, "plan.illuminations"),
         ({"plan": {"projector_size": [64]}}, "plan.projector_size"),
         ({"light_mount": {"offset_m": [0, "x", 0]}}, "light_mount.offset_m"),
+        ({"light_mount": {"diameter_m": "6 cm"}}, "light_mount.diameter_m"),
+        ({"light_mount": {"diameter_m": -0.06}}, "light_mount.diameter_m"),
         ({"calibration": {"lights": ["LED1"]}}, "calibration.lights"),
         ({"intrinsics": {"model": "PINHOLE"}}, "intrinsics"),
         ({"profile": {"camera": {"intrinsics": {"model": "PINHOLE", "width": "w",

@@ -79,6 +79,7 @@ MALFORMED = [
     ("illuminations", {}, "'illuminations'"),
     ("light_mount.type", "tripod", "plate, free"),
     ("light_mount.offset_m", [0.1, 0.0], "'light_mount.offset_m'"),
+    ("light_mount.diameter_m", -0.06, "'light_mount.diameter_m'"),
     ("camera_settings.exposure_s", 0, "'camera_settings.exposure_s'"),
     ("calibration.camera", DELETE, "'calibration.camera'"),
     ("known_distances.light_offset_m", -0.1, "'known_distances.light_offset_m'"),
