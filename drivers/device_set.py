@@ -19,6 +19,7 @@ class DeviceSet:
     distance_factors: tuple[float, ...] = ()
     free_light: bool = False  # the person holds the light at a new place per view
     light_offset_m: tuple[float, ...] | None = None  # the light on the camera plate
+    light_diameter_m: float | None = None  # the bulb's size (None: a point light)
     illuminations: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
     camera_settings: Mapping[str, Any] = field(default_factory=dict)
     projector_placements: int | None = None  # None: the projector rides on the plate

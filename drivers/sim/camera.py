@@ -65,6 +65,15 @@ class VignettingConfig:
 
 
 @dataclass(frozen=True)
+class GlossConfig:
+    """The ``sim.gloss`` section: a neutral GGX lobe on the whole object (a varnish or glaze):
+    ``specular`` its reflectance at normal incidence, ``alpha`` its roughness."""
+
+    specular: float = bounded(0.04, min=0.0, max=1.0)
+    alpha: float = bounded(0.2, above=0.0, max=1.0)
+
+
+@dataclass(frozen=True)
 class SensorConfig:
     """The ``camera`` section of a sim profile (defaults: a 640x480 14-bit RGGB camera)."""
 
@@ -152,6 +161,8 @@ class SimCamera:
         self._weights: dict[tuple[bytes, ...], np.ndarray] = {}
         self._rgb: dict[bytes, np.ndarray] = {}
         self.ambient_spd: np.ndarray | None = None  # room light in every frame (sim.ambient)
+        self.bulb_radius_m = 0.0  # a bulb with a size (sim.light_diameter_m); 0: a point
+        self.gloss: GlossConfig | None = None  # a neutral specular lobe (sim.gloss)
 
     def describe(self) -> dict[str, Any]:
         return {
@@ -211,8 +222,12 @@ class SimCamera:
         if spd.any():
             key: tuple[bytes, ...] = (b"light", _key(self.light.position))
             if key not in self._weights:
-                self._weights[key] = render.light_weight(self.caster, hits, self.light.position)
+                self._weights[key] = render.light_weight(
+                    self.caster, hits, self.light.position, self.bulb_radius_m
+                )
             terms.append((self._weights[key], self._vertex_rgb(spd)))
+            if self.gloss is not None:
+                terms.append((self._gloss_weight(hits, key), self._white_rgb(spd)))
         proj = self.projector
         if proj is not None and proj.image is not None:
             key = (
@@ -231,6 +246,28 @@ class SimCamera:
         if self.ambient_spd is not None:
             terms.append((np.ones(len(hits.index)), self._vertex_rgb(self.ambient_spd)))
         return render.shade_vertex_rgb(hits, terms)
+
+    def _gloss_weight(self, hits: render.ViewHits, light_key: tuple[bytes, ...]) -> np.ndarray:
+        """The gloss lobe's weight per hit for the light now on (none on the ground)."""
+        key = (b"gloss", *light_key[1:])
+        if key not in self._weights:
+            assert self.gloss is not None
+            weight = render.specular_weight(
+                hits, self.light.position, self.pose.center, self._weights[light_key],
+                self.gloss.specular, self.gloss.alpha,
+            )
+            if hits.on_ground is not None:
+                weight = np.where(hits.on_ground, 0.0, weight)
+            self._weights[key] = weight
+        return self._weights[key]
+
+    def _white_rgb(self, spd: np.ndarray) -> np.ndarray:
+        """``C^T L`` per vertex: a highlight is the lamp's own colour (dichromatic model)."""
+        key = b"white" + _key(spd)
+        if key not in self._rgb:
+            resp = forward.response_matrix(self.sensitivity, spd)
+            self._rgb[key] = render.vertex_rgb(np.ones_like(self._reflectance), resp)
+        return self._rgb[key]
 
     def _vertex_rgb(self, spd: np.ndarray) -> np.ndarray:
         """Per-vertex ``(C^T L) r`` (plus the ground's paper and ink), cached per SPD (a

@@ -18,7 +18,9 @@ stands on, e.g. a printed marker board: ``texture`` (H, W) array or ``.npy`` pat
 ``extent`` [x0, y0, x1, y1] metres, ``paper`` and ``ink`` reflectances (a number or one value
 per wavelength); the scene is lifted to stand on it and the cameras aim at its middle),
 ``ambient`` (a room light in every frame: ``level``, ``spd``, ``distance_m``, see
-:mod:`drivers.sim.ambient`).
+:mod:`drivers.sim.ambient`), ``light_diameter_m`` (a bulb with a size, soft shadows; default
+the profile's ``light_mount.diameter_m``), ``gloss`` (a neutral GGX lobe: ``specular``,
+``alpha``).
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ from core.config import bounded, from_mapping
 from core.errors import RigError
 from core.files import write_bytes_atomically
 from drivers.sim.ambient import AmbientConfig, room_spd
-from drivers.sim.camera import SensorConfig
+from drivers.sim.camera import GlossConfig, SensorConfig
 from drivers.sim.members import RigCamera, RigLight, RigProjector, RigSpectrometer
 from drivers.sim.scene import SCENES, Scene, make_scene
 from drivers.sim.trajectory import (
@@ -82,6 +84,8 @@ class SimConfig:
     illuminations: dict[str, dict[str, float]] | None = bounded(None, min=0, max=1)
     ground: GroundConfig | None = None
     ambient: AmbientConfig | None = None
+    light_diameter_m: float = bounded(0.0, min=0, max=2)  # 0: a point light
+    gloss: GlossConfig | None = None  # None: a Lambertian object
 
 
 def sfm_image_name(view: int) -> str:
@@ -139,6 +143,9 @@ class SimRig:
             self.scene, self.light, self.projector, self.sensor, self.seed, ground=self.ground
         )
         self.camera.ambient_spd = room_spd(conf.ambient, self.light, self.trajectory.radius_m)
+        self.light_diameter_m = conf.light_diameter_m
+        self.camera.bulb_radius_m = conf.light_diameter_m / 2.0
+        self.camera.gloss = conf.gloss
         self.spectrometer = RigSpectrometer(
             lambda: self.light.spd() + self.projector.spd(), seed=self.seed
         )

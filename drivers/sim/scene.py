@@ -137,7 +137,9 @@ def _blob(rng: np.random.Generator, subdivisions: int) -> tuple[np.ndarray, np.n
 
 
 def _torus(rng: np.random.Generator, subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
-    n_major, n_minor = 100 * 2 ** (subdivisions - 5), 40 * 2 ** (subdivisions - 5)
+    # whole counts below subdivisions 5 too (2 ** -1 was a float: an unusable mesh)
+    n_major = max(12, round(100 * 2.0 ** (subdivisions - 5)))
+    n_minor = max(6, round(40 * 2.0 ** (subdivisions - 5)))
     R, r = 0.06, 0.025
     theta = 2 * np.pi * np.arange(n_major) / n_major
     phi = 2 * np.pi * np.arange(n_minor) / n_minor

@@ -39,6 +39,7 @@ def white_card(rig: SimRig, position: int) -> WhiteCard:
         "scene": "card",
         "views": 1,
         "light_offset_m": list(light_offset),
+        "light_diameter_m": rig.light_diameter_m,
         "camera": dict(rig.reference_camera),
         "trajectory": {"elevations_deg": [90.0], "radius_m": distance, "target_m": target},
     }

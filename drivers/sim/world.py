@@ -35,7 +35,7 @@ def shared_rig(devices: DeviceSet) -> SimRig:
 
 def world_config(devices: DeviceSet) -> dict[str, Any]:
     """The ``sim`` section completed from the plan: as many views, the plate offset (or a free
-    light), the elevations and the distances the person is asked to step to, the
+    light) and the bulb's size, the elevations and the distances the person is asked to step to, the
     illuminations, the camera settings, the projector placements and the board (the ground
     plane the object stands on)."""
     config = copy.deepcopy(dict(devices.simulation))
@@ -53,6 +53,8 @@ def world_config(devices: DeviceSet) -> dict[str, Any]:
     elif devices.light_offset_m is not None:
         config["light_offset_m"] = list(devices.light_offset_m)
     config["trajectory"] = trajectory
+    if devices.light_diameter_m:  # the simulated bulb is the size the profile gives it
+        config.setdefault("light_diameter_m", devices.light_diameter_m)
     config.setdefault("illuminations", {k: dict(v) for k, v in devices.illuminations.items()})
     camera = dict(config.get("camera") or {})
     for key in ("exposure_s", "iso"):

@@ -5,9 +5,10 @@ Rendering is split in two so several illuminations from one pose cost little:
 1. :func:`trace_view` casts one primary ray per sub-pixel (COLMAP pixel convention, pixel
    centres at +0.5) and keeps, for every sub-pixel that hits the mesh, the hit triangle's
    vertices, barycentrics, point and shading normal.
-2. :func:`light_weight` (a point light: bulb) or :func:`projector_weights` (a projector: a near
-   point light whose colour per ray is the projector pixel the point projects to) computes the
-   wavelength-independent factor ``m · s`` per hit once per light position.
+2. :func:`light_weight` (a point light, or a bulb with a size: bulb) or
+   :func:`projector_weights` (a projector: a near point light whose colour per ray is the
+   projector pixel the point projects to) computes the wavelength-independent factor ``m · s``
+   per hit once per light position; :func:`specular_weight` a neutral gloss lobe's.
 3. :func:`shade` turns those into a linear image for any spectra: per-vertex RGB
    ``(C^T L) r`` interpolated with the barycentrics (exactly the barycentric interpolation of
    the reflectance, since the model is linear in r), times ``m · s``, box-filtered to pixels.
@@ -27,11 +28,12 @@ from typing import Literal
 import numpy as np
 
 from core.errors import RigError
-from reconstruct.model import forward
+from reconstruct.model import bulb, forward
 from reconstruct.model.camera import Intrinsics, Pose, project
 from reconstruct.model.raycast import RayCaster
 
 NormalMode = Literal["smooth", "flat"]
+BULB_SAMPLES = 16  # directions to a sized bulb per hit (even: they come in opposite pairs)
 
 
 def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -262,19 +264,75 @@ def trace_view(
     )
 
 
-def light_weight(caster: RayCaster, hits: ViewHits, light_position: np.ndarray) -> np.ndarray:
-    """``m · s`` per hit for a point light at ``light_position`` (world, metres), (K,)."""
-    s = forward.shading(hits.points, hits.normals, light_position)
-    lit = s > 0
+def light_weight(
+    caster: RayCaster, hits: ViewHits, light_position: np.ndarray, radius: float = 0.0
+) -> np.ndarray:
+    """``m · s`` per hit for a point light at ``light_position`` (world, metres), (K,); with a
+    ``radius``, for a spherical bulb there: :data:`BULB_SAMPLES` directions over the cone it
+    subtends from each hit (:func:`reconstruct.model.bulb.cone_samples`), each with its own
+    cosine and shadow ray — soft shadow edges, and a bulb across the horizon lit in part."""
+    centre = np.asarray(light_position, dtype=float)
+    if radius <= 0:
+        s = forward.shading(hits.points, hits.normals, centre)
+        return s * _unoccluded(caster, hits, np.broadcast_to(centre, hits.points.shape), s > 0)
+    targets, scale = bulb.cone_samples(hits.points, centre, radius, BULB_SAMPLES)
+    total = np.zeros(len(hits.index))
+    for target in targets:
+        ray = target - hits.points
+        cos = np.einsum("ij,ij->i", hits.normals, ray) / np.linalg.norm(ray, axis=1)
+        total += np.maximum(cos, 0.0) * _unoccluded(caster, hits, target, cos > 0)
+    return total * scale
+
+
+def _unoccluded(
+    caster: RayCaster, hits: ViewHits, targets: np.ndarray, lit: np.ndarray
+) -> np.ndarray:
+    """Whether each ``lit`` hit sees its target (K, 3): false where not ``lit``."""
     # Only a segment meeting the mesh's bounding box can be blocked: the rest (most ground
     # hits) need no shadow ray.
     test = lit.copy()
     test[lit] = _segment_meets_box(
-        hits.points[lit], light_position, caster.vertices.min(0), caster.vertices.max(0)
+        hits.points[lit], targets[lit], caster.vertices.min(0), caster.vertices.max(0)
     )
-    m = lit & ~test
-    m[test] = ~caster.occluded(hits.points[test], light_position, normals=hits.face_normals[test])
-    return s * m
+    clear = lit & ~test
+    clear[test] = ~caster.occluded(
+        hits.points[test], targets[test], normals=hits.face_normals[test]
+    )
+    return clear
+
+
+def specular_weight(
+    hits: ViewHits,
+    light_position: np.ndarray,
+    camera_centre: np.ndarray,
+    lit: np.ndarray,
+    specular: float,
+    alpha: float,
+) -> np.ndarray:
+    """A neutral GGX lobe's ``π f_s · m · s`` per hit (K,), ``lit`` the light's ``m · s``: with
+    the white reflectance's RGB it is the highlight in the lamp's own colour (dichromatic
+    model). Trowbridge–Reitz D, Smith's separable G, Schlick's Fresnel from ``specular`` (the
+    reflectance at normal incidence, 0.04 for a varnish)."""
+    n = hits.normals
+    to_light = np.asarray(light_position, dtype=float) - hits.points
+    to_eye = np.asarray(camera_centre, dtype=float) - hits.points
+    to_light /= np.linalg.norm(to_light, axis=1, keepdims=True)
+    to_eye /= np.linalg.norm(to_eye, axis=1, keepdims=True)
+    half = to_light + to_eye
+    half /= np.linalg.norm(half, axis=1, keepdims=True)
+    cos_l = np.einsum("ij,ij->i", n, to_light)
+    cos_v = np.einsum("ij,ij->i", n, to_eye)
+    cos_h = np.einsum("ij,ij->i", n, half)
+    a2 = alpha * alpha
+    d = a2 / (np.pi * (cos_h**2 * (a2 - 1.0) + 1.0) ** 2)
+
+    def g1(c: np.ndarray) -> np.ndarray:
+        c = np.clip(c, 1e-6, 1.0)
+        return 2.0 * c / (c + np.sqrt(a2 + (1.0 - a2) * c * c))
+
+    fresnel = specular + (1.0 - specular) * (1.0 - np.einsum("ij,ij->i", to_eye, half)) ** 5
+    f_s = d * g1(cos_l) * g1(cos_v) * fresnel / (4.0 * np.clip(cos_l * cos_v, 1e-6, None))
+    return np.where((cos_l > 0) & (cos_v > 0), np.pi * f_s * lit, 0.0)
 
 
 def _segment_meets_box(

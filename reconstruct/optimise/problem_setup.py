@@ -19,6 +19,7 @@ from calibration.basis import SpectralBasis
 from calibration.estimation import estimate_reflectance
 from calibration.prior import spectral_regulariser
 from core.errors import RigError
+from reconstruct.model.bulb import rim_points
 from reconstruct.model.forward import shading
 from reconstruct.model.raycast import RayCaster
 from reconstruct.optimise.cost import JointCost
@@ -56,25 +57,15 @@ def rim_hidden(
     eps: float,
 ) -> np.ndarray:
     """Whether any of :data:`BULB_RIM_RAYS` points on the rim of a bulb of ``radius`` at
-    ``centres``, as each point sees it (a circle across the line of sight), is hidden from it."""
-    sight = centres - points
-    sight /= np.linalg.norm(sight, axis=1, keepdims=True)
-    # any direction across the line of sight: the axis it is least aligned with, crossed
-    axis = np.eye(3)[np.argmin(np.abs(sight), axis=1)]
-    across = np.cross(sight, axis)
-    across /= np.linalg.norm(across, axis=1, keepdims=True)
-    other = np.cross(sight, across)
-    phi = 2.0 * np.pi * np.arange(BULB_RIM_RAYS) / BULB_RIM_RAYS
-    rim = centres[:, None] + radius * (
-        np.cos(phi)[None, :, None] * across[:, None] + np.sin(phi)[None, :, None] * other[:, None]
-    )
+    ``centres``, as each point sees it, is hidden from it."""
+    rim = rim_points(points, centres, radius, BULB_RIM_RAYS)  # (rays, N, 3)
     hidden = caster.occluded(
-        np.repeat(points, BULB_RIM_RAYS, axis=0),
+        np.tile(points, (BULB_RIM_RAYS, 1)),
         rim.reshape(-1, 3),
         eps,
-        np.repeat(normals, BULB_RIM_RAYS, axis=0),
+        np.tile(normals, (BULB_RIM_RAYS, 1)),
     )
-    return np.asarray(hidden.reshape(-1, BULB_RIM_RAYS).any(axis=1))
+    return np.asarray(hidden.reshape(BULB_RIM_RAYS, -1).any(axis=0))
 
 
 def build_problem(

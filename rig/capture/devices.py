@@ -127,6 +127,7 @@ def device_set(profile: Profile, seed: int) -> DeviceSet:
         distance_factors=tuple(profile.plan.trajectory.distance_factors),
         free_light=profile.light_mount.type == "free",
         light_offset_m=profile.light_mount.offset_m,
+        light_diameter_m=profile.light_mount.diameter_m,
         illuminations=profile.illuminations,
         camera_settings=profile.camera_settings,
         projector_placements=None if placements is None else placements.count,
