@@ -8,6 +8,7 @@ initial mesh) and scored against the truth and against a per-vertex least-square
     python -m bench.external --size medium --scenes spot-stepped
     python -m bench.external --size medium --optics real   # 6 cm bulb, 4 % gloss, cos⁴
     python -m bench.external --size medium --optics real-lens --flat-field  # fall-off calibrated
+    python -m bench.external --size medium --third-lamp Fluence.LED.AnthoSpec  # 3 illuminations
 
 Per scene: initial and final accuracy/completeness (mean, median, p90), spectral RMSE (mean,
 median, per ColorChecker patch), CIEDE2000 under D65 and A (per vertex mean/median/p90, per
@@ -315,6 +316,13 @@ def main(argv: list[str] | None = None) -> int:
         help="calibrate the lens's fall-off first, with rig calibrate's flat-field step on white "
         "cards Mitsuba renders through the same lens; decode divides by it",
     )
+    p.add_argument(
+        "--third-lamp",
+        metavar="LAMP",
+        default=None,
+        help="a third illumination L3 (the bulb's r+g+b channels) with this measured lamp, "
+        "e.g. Fluence.LED.AnthoSpec (a column of the lamps table, or elgato:COLUMN)",
+    )
     p.add_argument("--config", type=Path, default=None,
                    help="a reconstruction config (YAML) merged over the budget, e.g. "
                    "mesh: {method: patchmatch}")
@@ -330,6 +338,10 @@ def main(argv: list[str] | None = None) -> int:
         size = replace(size, flat_field=True)
         folder += "-flat"
     names = a.scenes or (SMOKE_SCENES if a.size == "smoke" else tuple(SCENES))
+    specs = [SCENES[n] for n in names]
+    if a.third_lamp:
+        specs = [replace(s, lamps={**s.lamps, "L3": a.third_lamp}) for s in specs]
+        folder += f"-L3-{a.third_lamp}"
     out = a.out / folder
     out.mkdir(parents=True, exist_ok=True)
     budget = a.budget or ("smoke" if a.size == "smoke" else "default")
@@ -340,17 +352,19 @@ def main(argv: list[str] | None = None) -> int:
 
         for section, values in load_config(a.config).items():
             config[section] = {**config.get(section, {}), **values}
-    results = [run_scene(SCENES[n], size, out, cache, a.data, config) for n in names]
+    results = [run_scene(spec, size, out, cache, a.data, config) for spec in specs]
     report(
         "external",
         out,
         tables(results),
-        {"size": a.size, "optics": a.optics, "flat_field": a.flat_field, "results": results},
+        {"size": a.size, "optics": a.optics, "flat_field": a.flat_field,
+         "third_lamp": a.third_lamp, "results": results},
         machine_info(),
         notes=[
             f"{a.size}: {size.width}x{size.height}, {size.views} views, {size.spp} spp, "
             f"ambient {size.ambient} (frames {size.ambient_frames}), optics {a.optics} "
-            f"({size.optics}), flat field {a.flat_field}, optimiser budget {budget}, "
+            f"({size.optics}), flat field {a.flat_field}, third lamp {a.third_lamp}, "
+            f"optimiser budget {budget}, "
             f"config {a.config}; error maps under {out}/SCENE/"
         ],
     )

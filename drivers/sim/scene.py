@@ -143,8 +143,7 @@ def _torus(rng: np.random.Generator, subdivisions: int) -> tuple[np.ndarray, np.
     R, r = 0.06, 0.025
     theta = 2 * np.pi * np.arange(n_major) / n_major
     phi = 2 * np.pi * np.arange(n_minor) / n_minor
-    T, P = np.meshgrid(theta, phi, indexing="ij")
-    T, P = T.ravel(), P.ravel()
+    T, P = (grid.ravel() for grid in np.meshgrid(theta, phi, indexing="ij"))
     ring = np.stack([np.cos(T), np.sin(T), np.zeros_like(T)], axis=1)
     normal = np.cos(P)[:, None] * ring + np.sin(P)[:, None] * np.array([0.0, 0.0, 1.0])
     base = R * ring + r * normal

@@ -216,3 +216,33 @@ def test_brightness_splits_the_band_the_camera_sees_from_the_prior() -> None:
     assert b["out_of_band"] == pytest.approx(1.3)
     assert 1.0 < b["all"] < 1.3
     assert (b["band_first_nm"], b["band_last_nm"]) == (450.0, 640.0)
+
+
+def test_a_third_lamp_is_a_third_illumination_that_lowers_the_floor(
+    shared_data: Path, tmp_path: Path
+) -> None:
+    """`--third-lamp`: the bulb's r+g+b channels switch a third measured lamp, captured and
+    reconstructable like the others; its information floor is below the two lamps'."""
+    from dataclasses import replace
+
+    two = SceneSpec(
+        "smoke",
+        "spot.obj",
+        {"L1": "Sunwayfoto.LED.FL96.at.3000K", "L2": "Sunwayfoto.LED.FL96.at.5500K"},
+        "Nikon D700",
+        (1.0,),
+        (30.0,),
+    )
+    three = replace(two, lamps={**two.lamps, "L3": "Fluence.LED.AnthoSpec"})
+    size = Size(width=64, height=48, focal_px=112.0, views=2, spp=4)
+    floors = []
+    for spec in (two, three):
+        session = build_session(spec, size, tmp_path / str(len(spec.lamps)), shared_data,
+                                tmp_path / "cache")  # fmt: skip
+        raws = sorted((session / "raw").glob("*.dng"))
+        assert len(raws) == 2 * len(spec.lamps)
+        floors.append(information_floor(session))
+    assert any(p.name.endswith("_L3.dng") for p in raws)
+    assert floors[1]["rmse_mean"] < 0.9 * floors[0]["rmse_mean"]
+    d65 = [f["colour"][0]["per_vertex"]["mean"] for f in floors]
+    assert d65[1] < 0.7 * d65[0]
