@@ -61,3 +61,33 @@ def render_values(
     if mask is not None:
         weight = weight * np.asarray(mask, dtype=bool)
     return weight[:, None] * (r @ np.asarray(response, dtype=float).T)
+
+
+def ggx_lobe(
+    normals: np.ndarray,
+    to_light: np.ndarray,
+    to_eye: np.ndarray,
+    alpha: float,
+    specular: float = 1.0,
+) -> np.ndarray:
+    """``π f_s cos θ_l`` of a neutral GGX lobe per point (N,), from unit normals and unit
+    directions to the light and the eye (N, 3): Trowbridge–Reitz D, Smith's separable G,
+    Schlick's Fresnel from ``specular`` (the reflectance at normal incidence; 1: none). Times
+    ``s / cos θ_l`` (the light's irradiance) and the lamp's own RGB it is a gloss highlight
+    in this model's units, where a white Lambertian point returns ``s``.
+    """
+    half = to_light + to_eye
+    half = half / np.linalg.norm(half, axis=1, keepdims=True)
+    cos_l = np.einsum("ij,ij->i", normals, to_light)
+    cos_v = np.einsum("ij,ij->i", normals, to_eye)
+    cos_h = np.einsum("ij,ij->i", normals, half)
+    a2 = alpha * alpha
+    d = a2 / (np.pi * (cos_h**2 * (a2 - 1.0) + 1.0) ** 2)
+
+    def g1(c: np.ndarray) -> np.ndarray:
+        c = np.clip(c, 1e-6, 1.0)
+        return 2.0 * c / (c + np.sqrt(a2 + (1.0 - a2) * c * c))
+
+    fresnel = specular + (1.0 - specular) * (1.0 - np.einsum("ij,ij->i", to_eye, half)) ** 5
+    lobe = np.pi * d * g1(cos_l) * g1(cos_v) * fresnel / (4.0 * np.clip(cos_v, 1e-6, None))
+    return np.where((cos_l > 0) & (cos_v > 0), lobe, 0.0)

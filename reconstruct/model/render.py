@@ -309,30 +309,16 @@ def specular_weight(
     specular: float,
     alpha: float,
 ) -> np.ndarray:
-    """A neutral GGX lobe's ``π f_s · m · s`` per hit (K,), ``lit`` the light's ``m · s``: with
-    the white reflectance's RGB it is the highlight in the lamp's own colour (dichromatic
-    model). Trowbridge–Reitz D, Smith's separable G, Schlick's Fresnel from ``specular`` (the
-    reflectance at normal incidence, 0.04 for a varnish)."""
-    n = hits.normals
+    """A neutral GGX lobe's weight per hit (K,) (:func:`forward.ggx_lobe`), ``lit`` the light's
+    ``m · s``: with the white reflectance's RGB it is the highlight in the lamp's own colour
+    (dichromatic model)."""
     to_light = np.asarray(light_position, dtype=float) - hits.points
     to_eye = np.asarray(camera_centre, dtype=float) - hits.points
     to_light /= np.linalg.norm(to_light, axis=1, keepdims=True)
     to_eye /= np.linalg.norm(to_eye, axis=1, keepdims=True)
-    half = to_light + to_eye
-    half /= np.linalg.norm(half, axis=1, keepdims=True)
-    cos_l = np.einsum("ij,ij->i", n, to_light)
-    cos_v = np.einsum("ij,ij->i", n, to_eye)
-    cos_h = np.einsum("ij,ij->i", n, half)
-    a2 = alpha * alpha
-    d = a2 / (np.pi * (cos_h**2 * (a2 - 1.0) + 1.0) ** 2)
-
-    def g1(c: np.ndarray) -> np.ndarray:
-        c = np.clip(c, 1e-6, 1.0)
-        return 2.0 * c / (c + np.sqrt(a2 + (1.0 - a2) * c * c))
-
-    fresnel = specular + (1.0 - specular) * (1.0 - np.einsum("ij,ij->i", to_eye, half)) ** 5
-    f_s = d * g1(cos_l) * g1(cos_v) * fresnel / (4.0 * np.clip(cos_l * cos_v, 1e-6, None))
-    return np.where((cos_l > 0) & (cos_v > 0), np.pi * f_s * lit, 0.0)
+    cos_l = np.einsum("ij,ij->i", hits.normals, to_light)
+    lobe = forward.ggx_lobe(hits.normals, to_light, to_eye, alpha, specular)
+    return np.where(cos_l > 0, lobe * lit / np.maximum(cos_l, 1e-12), 0.0)
 
 
 def _segment_meets_box(

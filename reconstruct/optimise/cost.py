@@ -214,6 +214,8 @@ class JointCost:
             y_obs, image_grad, duv = o.fixed_rgb, None, None
         else:
             y_obs, image_grad, duv = self._sample(X, derivatives and positions)
+        if p.weights.observed_offset is not None:
+            y_obs = y_obs - p.weights.observed_offset
         error = rendered_error(colours, s_pair, self.obs_pair, o.vertex, o.illumination, y_obs)
         state = RenderState(colours, error, s_pair, image_grad=image_grad, proj_jac=duv)
         if derivatives:

@@ -125,6 +125,8 @@ class Weights:
     rendering_scale: float = 1.0
     observation: np.ndarray | None = None
     spectral: SpectralRegulariser | None = None  # what γ1 weighs; None: the paper's smoothness
+    # a highlight per observation (M, 3) taken off what it observed (reconstruct.optimise.gloss)
+    observed_offset: np.ndarray | None = None
 
 
 @dataclass

@@ -55,6 +55,10 @@ class OptimiseSettings:
     highlight_tolerance: float = bounded(0.1, above=0.0, max=1e3)
     # the lobe's reach: the allowance doubles at this angle between normal and half-vector
     highlight_lobe_deg: float = bounded(25.0, above=0.0, max=180.0)
+    # Gloss, modelled: before each joint stage a neutral GGX lobe (one per object) is fitted to
+    # the diffuse model's residual and its highlight taken off the observations
+    # (reconstruct/optimise/gloss.py); ``none``: a Lambertian object.
+    gloss: Literal["none", "fit"] = "none"
     outer_iterations: int = bounded(3, min=0, max=1000)
     light_iterations: int = bounded(15, min=0, max=10_000)
     # Each joint stage does most of its work in its first few steps; the shadow and

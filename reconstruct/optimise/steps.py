@@ -21,6 +21,7 @@ from calibration.bounds import project
 from core.errors import RigError
 from reconstruct.optimise.checkpoint import Checkpoint, OptimiseState
 from reconstruct.optimise.cost import JointCost
+from reconstruct.optimise.gloss import without_gloss
 from reconstruct.optimise.mesh import adjacency, vertex_normals
 from reconstruct.optimise.problem import Problem
 from reconstruct.optimise.problem_setup import (
@@ -257,6 +258,14 @@ def optimise(
         theta = run(
             "light", 0, problem, theta, problem.mask(False, True, free_light), cfg.light_iterations
         )
+        if cfg.gloss == "fit":  # again, from a start with the found light's highlights taken off
+            problem = without_gloss(problem, theta)
+            A0 = initial_reflectance(problem, theta, inp.basis, cfg.init_smoothness, upper)
+            theta = problem.pack(X, A0, problem.unpack(theta)[2])
+            theta = run(
+                "light", 0, problem, theta, problem.mask(False, True, free_light),
+                cfg.light_iterations,
+            )
         save(0, False, theta, problem)
         first_outer = 1
     for outer in range(first_outer, last_outer + 1):
@@ -265,6 +274,8 @@ def optimise(
         X_prev, light_prev = X_prev.copy(), light_prev.copy()
         coarse = outer <= len(blurs)
         problem = build_problem(level(outer), X_prev, light_prev, cfg)
+        if cfg.gloss == "fit":
+            problem = without_gloss(problem, theta)
         seconds["shadows"] = seconds.get("shadows", 0.0) + time.perf_counter() - t0
         # Vertices no view observes have no data term: only the geometric term (blind to
         # tangential motion) would move them, so they keep their positions; so do vertices
