@@ -37,6 +37,14 @@ class GlossFit:
     explained: float
     highlight: np.ndarray
 
+    def summary(self) -> dict[str, float]:
+        """What the report keeps (the first record of the stage that used it)."""
+        return {
+            "specular": round(self.specular, 5),
+            "roughness": self.roughness,
+            "explained": round(self.explained, 4),
+        }
+
 
 def fit_gloss(problem: Problem, theta: np.ndarray) -> GlossFit:
     """Fit the lobe to the residual ``y_obs − y_diffuse`` of every observation at ``theta``."""
@@ -72,11 +80,11 @@ def fit_gloss(problem: Problem, theta: np.ndarray) -> GlossFit:
     return best
 
 
-def without_gloss(problem: Problem, theta: np.ndarray) -> Problem:
-    """``problem`` with the fitted lobe's highlight taken off every observation."""
+def without_gloss(problem: Problem, theta: np.ndarray) -> tuple[Problem, GlossFit]:
+    """``problem`` with the fitted lobe's highlight taken off every observation, and the fit."""
     fit = fit_gloss(problem, theta)
     log.info(
         "gloss: specular %.3g, roughness %.2g, %.1f %% of the diffuse residual explained",
         fit.specular, fit.roughness, 100 * fit.explained,
     )
-    return replace(problem, weights=replace(problem.weights, observed_offset=fit.highlight))
+    return replace(problem, weights=replace(problem.weights, observed_offset=fit.highlight)), fit

@@ -21,7 +21,7 @@ from calibration.bounds import project
 from core.errors import RigError
 from reconstruct.optimise.checkpoint import Checkpoint, OptimiseState
 from reconstruct.optimise.cost import JointCost
-from reconstruct.optimise.gloss import without_gloss
+from reconstruct.optimise.gloss import GlossFit, without_gloss
 from reconstruct.optimise.mesh import adjacency, vertex_normals
 from reconstruct.optimise.problem import Problem
 from reconstruct.optimise.problem_setup import (
@@ -139,6 +139,7 @@ def optimise(
         iterations: int,
         directions: np.ndarray | None = None,
         constrain: Callable[[np.ndarray], np.ndarray] | None = None,
+        gloss: GlossFit | None = None,
     ) -> np.ndarray:
         t0 = time.perf_counter()
         cost = JointCost(problem, cfg.robust, cfg.robust_scale)
@@ -156,6 +157,7 @@ def optimise(
                 "accepted": True,
                 "seconds": 0.0,
                 "observations": problem.obs.count,
+                **({} if gloss is None else {"gloss": gloss.summary()}),
             }
         )
 
@@ -259,12 +261,12 @@ def optimise(
             "light", 0, problem, theta, problem.mask(False, True, free_light), cfg.light_iterations
         )
         if cfg.gloss == "fit":  # again, from a start with the found light's highlights taken off
-            problem = without_gloss(problem, theta)
+            problem, fit = without_gloss(problem, theta)
             A0 = initial_reflectance(problem, theta, inp.basis, cfg.init_smoothness, upper)
             theta = problem.pack(X, A0, problem.unpack(theta)[2])
             theta = run(
                 "light", 0, problem, theta, problem.mask(False, True, free_light),
-                cfg.light_iterations,
+                cfg.light_iterations, gloss=fit,
             )
         save(0, False, theta, problem)
         first_outer = 1
@@ -274,8 +276,9 @@ def optimise(
         X_prev, light_prev = X_prev.copy(), light_prev.copy()
         coarse = outer <= len(blurs)
         problem = build_problem(level(outer), X_prev, light_prev, cfg)
+        gloss: GlossFit | None = None
         if cfg.gloss == "fit":
-            problem = without_gloss(problem, theta)
+            problem, gloss = without_gloss(problem, theta)
         seconds["shadows"] = seconds.get("shadows", 0.0) + time.perf_counter() - t0
         # Vertices no view observes have no data term: only the geometric term (blind to
         # tangential motion) would move them, so they keep their positions; so do vertices
@@ -302,7 +305,8 @@ def optimise(
             return problem.pack(limit_motion(X, X_prev, X0, step_radius, total_radius), A, light)
 
         theta = run(
-            stage, outer, problem, theta, mask, cfg.joint_iterations, directions, within_reach
+            stage, outer, problem, theta, mask, cfg.joint_iterations, directions, within_reach,
+            gloss,
         )
         X_new, _, light_new = problem.unpack(theta)
         moved = float(np.max(np.linalg.norm(X_new - X_prev, axis=1)))

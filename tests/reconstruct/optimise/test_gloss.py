@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reconstruct.optimise.gloss import fit_gloss
+from reconstruct.optimise.gloss import ROUGHNESS, fit_gloss
 from reconstruct.optimise.problem_setup import build_problem
 from reconstruct.optimise.settings import OptimiseSettings
 from reconstruct.optimise.steps import optimise
@@ -59,3 +59,11 @@ def test_a_matte_scene_is_left_as_it_was(scene: SyntheticScene) -> None:
     light_none, rmse_none = errors(scene, scene)
     light_fit, rmse_fit = errors(scene, scene, gloss="fit")
     assert abs(light_fit - light_none) < 1e-3 and rmse_fit < 1.02 * rmse_none
+
+
+def test_each_stage_reports_the_lobe_it_took_off(glossy: SyntheticScene) -> None:
+    cfg = OptimiseSettings(gloss="fit", outer_iterations=1, joint_iterations=2, light_iterations=3)
+    res = optimise(glossy.input(), cfg)
+    fits = [h["gloss"] for h in res.history if "gloss" in h]
+    assert [h["stage"] for h in res.history if "gloss" in h] == ["light", "joint"]
+    assert all(f["roughness"] in ROUGHNESS and f["specular"] > 0.01 for f in fits)
