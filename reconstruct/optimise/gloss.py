@@ -4,7 +4,8 @@ The dichromatic model: a glossy surface adds to its diffuse colour a highlight i
 own colour. Between joint stages one GGX lobe for the whole object
 (:func:`reconstruct.model.forward.ggx_lobe`) is fitted to the residual of the diffuse model at
 the current shape, reflectance and light: its roughness from :data:`ROUGHNESS`, its scale (the
-specular reflectance, ≥ 0) by least squares. The next stage subtracts its predicted highlight
+specular reflectance, ≥ 0) by least squares, beside the same lobe in each surface's own colour
+(a shading error near the mirror direction, which is not gloss and is left in). The next stage subtracts its predicted highlight
 from each observation (``Weights.observed_offset``), so the diffuse model is fitted to the
 diffuse part; inside a stage the highlight is frozen, as the shadow masks are.
 """
@@ -64,20 +65,34 @@ def fit_gloss(problem: Problem, theta: np.ndarray) -> GlossFit:
     to_eye = centres[pc] - x
     to_eye /= np.linalg.norm(to_eye, axis=1, keepdims=True)
     lit = state.pair_s > 0  # the observation set keeps lit pairs only; the guard is cheap
-    lamp = problem.rig.responses.sum(axis=2)[problem.obs.illumination]  # (M, 3)
+    o = problem.obs
+    lamp = problem.rig.responses.sum(axis=2)[o.illumination]  # (M, 3)
+    own = state.colours[o.illumination, o.vertex]  # the vertex's diffuse colour (M, 3)
     total = float(np.sum(residual**2))
     best = GlossFit(0.0, ROUGHNESS[0], 0.0, np.zeros_like(residual))
     for alpha in ROUGHNESS:
-        lobe = np.where(lit, ggx_lobe(n, to_light, to_eye, alpha) / dist2, 0.0)
-        shape = lobe[cost.obs_pair, None] * lamp
-        energy = float(np.sum(shape**2))
-        if energy <= 0:
+        lobe = np.where(lit, ggx_lobe(n, to_light, to_eye, alpha) / dist2, 0.0)[cost.obs_pair]
+        # the dichromatic split: along the lobe, what has the lamp's colour is gloss; what has
+        # the surface's own colour is a shading error the lobe would otherwise absorb
+        highlight, shading_error = lobe[:, None] * lamp, lobe[:, None] * own
+        scale = _neutral_scale(residual, highlight, shading_error)
+        if scale <= 0:
             continue
-        scale = max(float(np.sum(residual * shape)) / energy, 0.0)
-        explained = 1.0 - float(np.sum((residual - scale * shape) ** 2)) / max(total, 1e-300)
+        explained = 1.0 - float(np.sum((residual - scale * highlight) ** 2)) / max(total, 1e-300)
         if explained > best.explained:
-            best = GlossFit(scale, alpha, explained, scale * shape)
+            best = GlossFit(scale, alpha, explained, scale * highlight)
     return best
+
+
+def _neutral_scale(residual: np.ndarray, neutral: np.ndarray, coloured: np.ndarray) -> float:
+    """The scale of ``neutral`` in the least-squares fit of ``residual`` by both regressors
+    (M, 3) together; 0 where it comes out negative or the two cannot be told apart."""
+    a, b = neutral.ravel(), coloured.ravel()
+    gram = np.array([[a @ a, a @ b], [a @ b, b @ b]])
+    rhs = np.array([a @ residual.ravel(), b @ residual.ravel()])
+    if np.linalg.cond(gram) > 1e8:
+        return 0.0
+    return max(float(np.linalg.solve(gram, rhs)[0]), 0.0)
 
 
 def without_gloss(problem: Problem, theta: np.ndarray) -> tuple[Problem, GlossFit]:
