@@ -321,6 +321,15 @@ def optimise(
     if problem.frames is not inp.frames:  # ended on a coarse level: judge it at full resolution
         X, _, light = problem.unpack(theta)
         problem = build_problem(inp, X, light, cfg)
+    if problem.weights.observed_offset is not None:
+        # the reflectance once more from the observations as they are (highlights down-weighted
+        # when that is on): the fitted lobe places the light and the shape, but one roughness
+        # and one scale per object misplace colour where the real lobe differs
+        problem = replace(problem, weights=replace(problem.weights, observed_offset=None))
+        theta = run(
+            "colour", last_outer, problem, theta, problem.mask(False, True, False),
+            cfg.joint_iterations,
+        )
     solved = cfg.optimise_positions and last_outer > 0
     o = problem.obs
     views = np.bincount(o.vertex[o.pair_start], minlength=problem.n_vertices)
