@@ -1,13 +1,15 @@
 """A neutral gloss lobe fitted to what the diffuse model leaves (``optimise.gloss: fit``).
 
 The dichromatic model: a glossy surface adds to its diffuse colour a highlight in the lamp's
-own colour. Between joint stages one GGX lobe for the whole object
-(:func:`reconstruct.model.forward.ggx_lobe`) is fitted to the residual of the diffuse model at
-the current shape, reflectance and light: its roughness from :data:`ROUGHNESS`, its scale (the
-specular reflectance, ≥ 0) by least squares, beside the same lobe in each surface's own colour
-(a shading error near the mirror direction, which is not gloss and is left in). The next stage subtracts its predicted highlight
-from each observation (``Weights.observed_offset``), so the diffuse model is fitted to the
-diffuse part; inside a stage the highlight is frozen, as the shadow masks are.
+own colour. Before each joint stage (and a second light stage) one GGX lobe for the whole
+object (:func:`reconstruct.model.forward.ggx_lobe`) is fitted to the residual of the diffuse
+model at the current shape, reflectance and light: its roughness from :data:`ROUGHNESS`, its
+scale (the specular reflectance, ≥ 0) by least squares beside the same lobe in each surface's
+own colour (a shading error near the mirror direction, which is not gloss and is left in).
+The stage then subtracts its predicted highlight from each observation
+(``Weights.observed_offset``), so light and shape are fitted to the diffuse part; inside a
+stage the highlight is frozen, as the shadow masks are. The reflectance is solved once more at
+the end without it (:func:`reconstruct.optimise.steps.optimise`).
 """
 
 from __future__ import annotations
