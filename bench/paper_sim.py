@@ -372,7 +372,8 @@ def do_oracle(
     root = np.sqrt(s2)
     rgb = np.full((n, n_ill, 3), np.nan)
     rgb[seen2] = sy[seen2] / root[seen2][:, None]
-    seen = np.asarray(seen2.any(axis=1), dtype=bool)
+    # every illumination seen: a vertex whose other frames all clip has no estimate to score
+    seen = np.asarray(seen2.all(axis=1), dtype=bool)
     refl = np.full((n, inp.basis.B.shape[0]), np.nan)
     _, refl[seen] = estimate_reflectance(rgb[seen], rig.responses, inp.basis, shading=root[seen])
     npz = _write_npz(out / "reflectance.npz", X, F, refl, seen)

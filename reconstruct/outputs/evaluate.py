@@ -197,9 +197,15 @@ def surface_distance(
 def interpolate_at(
     mesh: trimesh.Trimesh, values: np.ndarray, points: np.ndarray, tri: np.ndarray
 ) -> np.ndarray:
-    """Per-vertex ``values`` of ``mesh`` interpolated at surface points on triangles ``tri``."""
+    """Per-vertex ``values`` of ``mesh`` interpolated at surface points on triangles ``tri``;
+    on a zero-area triangle (scans have a few) the nearest corner's value."""
     corners = np.asarray(mesh.vertices)[np.asarray(mesh.faces)[tri]]
-    bary = trimesh.triangles.points_to_barycentric(corners, points)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bary = trimesh.triangles.points_to_barycentric(corners, points)
+    degenerate = ~np.all(np.isfinite(bary), axis=1)
+    if degenerate.any():
+        gap = np.linalg.norm(corners[degenerate] - points[degenerate, None, :], axis=2)
+        bary[degenerate] = np.eye(3)[np.argmin(gap, axis=1)]
     bary = np.clip(bary, 0.0, 1.0)
     bary /= bary.sum(axis=1, keepdims=True)
     return np.einsum("mk,mkl->ml", bary, values[np.asarray(mesh.faces)[tri]])

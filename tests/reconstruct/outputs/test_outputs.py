@@ -18,7 +18,7 @@ from reconstruct.optimise.settings import OptimiseSettings
 from reconstruct.optimise.steps import OptimiseResult
 from reconstruct.optimise.synthetic import SyntheticScene
 from reconstruct.outputs import export
-from reconstruct.outputs.evaluate import evaluate, surface_distance
+from reconstruct.outputs.evaluate import evaluate, interpolate_at, surface_distance
 from reconstruct.outputs.gltf import Z_UP_TO_Y_UP
 from reconstruct.outputs.relight import Camera, encode_srgb, illuminant_spd, relight
 from reconstruct.outputs.result import load_result
@@ -388,3 +388,17 @@ def test_commands_accept_the_demo_folder(recon_dir: Path, tmp_path: Path) -> Non
     relit = tmp_path / "relit.png"
     assert main(["relight", str(demo), "--camera", str(camera), "--out", str(relit)]) == 0
     assert relit.is_file()
+
+
+def test_values_on_a_zero_area_triangle_are_its_nearest_corners() -> None:
+    """Scanned meshes carry a few degenerate faces: the truth looked up there is still a
+    number (it was NaN, and made a whole scene's mean NaN)."""
+
+    vertices = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0], [3, 0, 0], [4, 0, 0]])
+    faces = np.array([[0, 1, 2], [3, 4, 5]])  # the second is a line: zero area
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    values = np.arange(6.0)[:, None] * np.ones((1, 2))
+    points = np.array([[0.25, 0.25, 0.0], [3.9, 0.0, 0.0]])
+    out = interpolate_at(mesh, values, points, np.array([0, 1]))
+    np.testing.assert_allclose(out[0], [0.75, 0.75])  # 0.5·0 + 0.25·1 + 0.25·2
+    np.testing.assert_allclose(out[1], [5.0, 5.0])
