@@ -191,6 +191,7 @@ def optimise(
 
     blurs = coarse_blurs(cfg, inp.observed is None)
     last_outer = len(blurs) + cfg.outer_iterations if cfg.optimise_positions else 0
+    last_stage = last_outer + (cfg.gloss == "fit")  # with the gloss lobe: a colour stage last
     free_light = cfg.light_mode != "fixed"
     X0 = X.copy()
     scale0 = edge_scale(X0, adjacency(inp.faces, len(X0)))
@@ -219,7 +220,7 @@ def optimise(
         checkpoint.save(
             OptimiseState(
                 stage,
-                done or stage >= last_outer,
+                done or stage >= last_stage,
                 X,
                 A,
                 light,
@@ -314,22 +315,28 @@ def optimise(
         tol = cfg.settle_position * float(np.mean(problem.weights.scale))
         log.info("outer %d: vertices moved ≤ %.3g m, light ≤ %.3g m", outer, moved, light_moved)
         settled = not coarse and moved <= tol and light_moved <= cfg.settle_light_m
-        save(outer, settled, theta, problem)
+        if settled and last_stage > last_outer:  # the joint stages left are skipped on a resume too
+            save(last_outer, False, theta, problem)
+        else:
+            save(outer, settled, theta, problem)
         if settled:
             break
     t0 = time.perf_counter()
     if problem.frames is not inp.frames:  # ended on a coarse level: judge it at full resolution
         X, _, light = problem.unpack(theta)
         problem = build_problem(inp, X, light, cfg)
-    if problem.weights.observed_offset is not None:
+    if last_stage > last_outer and not (state is not None and state.done):
         # the reflectance once more from the observations as they are (highlights down-weighted
         # when that is on): the fitted lobe places the light and the shape, but one roughness
-        # and one scale per object misplace colour where the real lobe differs
-        problem = replace(problem, weights=replace(problem.weights, observed_offset=None))
+        # and one scale per object misplace colour where the real lobe differs. At the final
+        # shape and light, as a resumed solve rebuilds them.
+        X, _, light = problem.unpack(theta)
+        problem = build_problem(inp, X, light, cfg)
         theta = run(
-            "colour", last_outer, problem, theta, problem.mask(False, True, False),
+            "colour", last_stage, problem, theta, problem.mask(False, True, False),
             cfg.joint_iterations,
         )
+        save(last_stage, True, theta, problem)
     solved = cfg.optimise_positions and last_outer > 0
     o = problem.obs
     views = np.bincount(o.vertex[o.pair_start], minlength=problem.n_vertices)

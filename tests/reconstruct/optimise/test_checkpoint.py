@@ -29,20 +29,25 @@ def stop_in(stage: str):  # type: ignore[no-untyped-def]
     return progress
 
 
-@pytest.mark.parametrize("interrupt_in", ["joint 1", "joint 2"])
+@pytest.mark.parametrize(
+    ("interrupt_in", "gloss"),
+    [("joint 1", "none"), ("joint 2", "none"), ("joint 2", "fit"), ("colour 3", "fit")],
+)
 def test_resume_after_an_interruption_equals_an_uninterrupted_run(
-    tmp_path: Path, scene: SyntheticScene, interrupt_in: str
+    tmp_path: Path, scene: SyntheticScene, interrupt_in: str, gloss: str
 ) -> None:
+    """``gloss: fit`` ends with a colour stage (3 here), which a resume must not skip."""
+    cfg = replace(CFG, gloss=gloss)
     inp = scene.input(scene.vertices + 0.0005, images=False)
-    reference = optimise(inp, CFG)
-    checkpoint = Checkpoint(tmp_path / "checkpoint.npz", input_key(inp, CFG))
+    reference = optimise(inp, cfg)
+    checkpoint = Checkpoint(tmp_path / "checkpoint.npz", input_key(inp, cfg))
     with pytest.raises(Stop):
-        optimise(inp, CFG, stop_in(interrupt_in), checkpoint)
+        optimise(inp, cfg, stop_in(interrupt_in), checkpoint)
     saved = checkpoint.load()
     assert saved is not None and not saved.done
     assert saved.stage == int(interrupt_in.split()[1]) - 1  # the last completed stage
     seen: list[str] = []
-    resumed = optimise(inp, CFG, lambda name, rec: seen.append(name), checkpoint)
+    resumed = optimise(inp, cfg, lambda name, rec: seen.append(name), checkpoint)
     assert "light 0" not in seen  # the completed stages were not run again
     np.testing.assert_array_equal(resumed.vertices, reference.vertices)
     np.testing.assert_array_equal(resumed.alpha, reference.alpha)
@@ -51,7 +56,7 @@ def test_resume_after_an_interruption_equals_an_uninterrupted_run(
     assert len(resumed.history) == len(reference.history)
     # A finished checkpoint returns the result without solving again.
     again: list[str] = []
-    final = optimise(inp, CFG, lambda name, rec: again.append(name), checkpoint)
+    final = optimise(inp, cfg, lambda name, rec: again.append(name), checkpoint)
     assert again == []
     np.testing.assert_array_equal(final.vertices, reference.vertices)
 
