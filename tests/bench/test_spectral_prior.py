@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from bench.external import SCENES
 from bench.external_scene import DATA
 from bench.spectral_prior import main, munsell
 
@@ -25,6 +26,6 @@ def test_the_table_covers_both_regularisers_and_every_pair(tmp_path: Path) -> No
     assert main(["--noise", "0.01", "--seeds", "1", "--out", str(tmp_path)]) == 0
     rows = json.loads((tmp_path / "spectral_prior.json").read_text())["rows"]
     assert {r["regulariser"] for r in rows} == {"smoothness", "training"}
-    assert len({r["scene"] for r in rows}) == 3
+    assert {r["scene"] for r in rows} == set(SCENES)  # every external scene's camera and lamps
     assert all(0 < r["de_d65"] < 10 and 0 < r["rmse"] < 0.2 for r in rows)
     assert (tmp_path / "spectral_prior.md").is_file()
