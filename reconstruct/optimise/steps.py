@@ -321,22 +321,24 @@ def optimise(
             save(outer, settled, theta, problem)
         if settled:
             break
-    t0 = time.perf_counter()
-    if problem.frames is not inp.frames:  # ended on a coarse level: judge it at full resolution
-        X, _, light = problem.unpack(theta)
-        problem = build_problem(inp, X, light, cfg)
     if last_stage > last_outer and not (state is not None and state.done):
         # the reflectance once more from the observations as they are (highlights down-weighted
         # when that is on): the fitted lobe places the light and the shape, but one roughness
-        # and one scale per object misplace colour where the real lobe differs. At the final
-        # shape and light, as a resumed solve rebuilds them.
+        # and one scale per object misplace colour where the real lobe differs. At full
+        # resolution and the final shape and light, as a resumed solve rebuilds them.
+        t0 = time.perf_counter()
         X, _, light = problem.unpack(theta)
         problem = build_problem(inp, X, light, cfg)
+        seconds["shadows"] = seconds.get("shadows", 0.0) + time.perf_counter() - t0
         theta = run(
             "colour", last_stage, problem, theta, problem.mask(False, True, False),
             cfg.joint_iterations,
         )
         save(last_stage, True, theta, problem)
+    t0 = time.perf_counter()
+    if problem.frames is not inp.frames:  # ended on a coarse level: judge it at full resolution
+        X, _, light = problem.unpack(theta)
+        problem = build_problem(inp, X, light, cfg)
     solved = cfg.optimise_positions and last_outer > 0
     o = problem.obs
     views = np.bincount(o.vertex[o.pair_start], minlength=problem.n_vertices)

@@ -5,18 +5,19 @@ stage reads back as the composed image."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.ndimage import minimum_filter
+from tiny_scene import TINY
 
 pytest.importorskip("mitsuba")
 
 from bench._common import brightness, information_floor
 from bench.external import reflectance_brightness
 from bench.external_render import ShadingRenderer, compose
-from bench.external_scene import SceneSpec
 from bench.external_session import ExternalCamera, Size, build_session
 from bench.paper_sim import _write_npz
 from reconstruct.frames import decode
@@ -122,14 +123,7 @@ def test_tiny_session_decodes_to_the_composed_image(
 ) -> None:
     from reconstruct.outputs.evaluate import load_mesh
 
-    spec = SceneSpec(
-        "smoke",
-        "spot.obj",
-        {"L1": "Sunwayfoto.LED.FL96.at.3000K", "L2": "Sunwayfoto.LED.FL96.at.5500K"},
-        "Nikon D700",
-        (0.8, 1.2),
-        (30.0,),
-    )
+    spec = TINY
     size = Size(width=64, height=48, focal_px=112.0, views=4, spp=16, ambient=0.05)
     composed: dict[tuple[int, str | None], np.ndarray] = {}
     render_linear = ExternalCamera.render_linear
@@ -223,16 +217,7 @@ def test_a_third_lamp_is_a_third_illumination_that_lowers_the_floor(
 ) -> None:
     """`--third-lamp`: the bulb's r+g+b channels switch a third measured lamp, captured and
     reconstructable like the others; its information floor is below the two lamps'."""
-    from dataclasses import replace
-
-    two = SceneSpec(
-        "smoke",
-        "spot.obj",
-        {"L1": "Sunwayfoto.LED.FL96.at.3000K", "L2": "Sunwayfoto.LED.FL96.at.5500K"},
-        "Nikon D700",
-        (1.0,),
-        (30.0,),
-    )
+    two = replace(TINY, distance_factors=(1.0,))
     three = replace(two, lamps={**two.lamps, "L3": "Fluence.LED.AnthoSpec"})
     size = Size(width=64, height=48, focal_px=112.0, views=2, spp=4)
     floors = []

@@ -9,36 +9,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tiny_scene import TINY
 
 pytest.importorskip("mitsuba")
 
 from bench.external_optics import PRESETS, Optics, falloff_gain, sphere_radiance
 from bench.external_render import ShadingRenderer
 from reconstruct.model.camera import Intrinsics, Pose
+from tests.plates import join, rectangle
 
 BULB = PRESETS["bulb"]
-
-
-def rectangle(
-    corner: tuple[float, ...], edge_a: tuple[float, ...], edge_b: tuple[float, ...], n: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """A rectangle sampled n x n, its normal along edge_a x edge_b."""
-    a, b = (t.ravel()[:, None] for t in np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n)))
-    vertices = np.asarray(corner) + a * np.asarray(edge_a) + b * np.asarray(edge_b)
-    i = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).ravel()
-    faces = np.concatenate([np.stack([i, i + 1, i + n + 1], 1), np.stack([i, i + n + 1, i + n], 1)])
-    return vertices, faces
-
-
-def scene(*parts: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Meshes joined, part k is patch k."""
-    vertices, faces, patch, offset = [], [], [], 0
-    for k, (v, f) in enumerate(parts):
-        vertices.append(v)
-        faces.append(f + offset)
-        patch.append(np.full(len(v), k))
-        offset += len(v)
-    return np.concatenate(vertices), np.concatenate(faces), np.concatenate(patch)
 
 
 def plate_points(intr: Intrinsics, pose: Pose) -> np.ndarray:
@@ -66,7 +46,7 @@ def test_sphere_of_equal_power_is_the_point_light_seen_from_far() -> None:
     radiance = sphere_radiance(intensity, radius)
     # power: a Lambertian sphere emits π L per unit area over 4π r², the point 4π I
     np.testing.assert_allclose(np.pi * radiance * 4 * np.pi * radius**2, 4 * np.pi * intensity)
-    v, f, patch = scene(PLATE)
+    v, f, patch = join(PLATE)
     point = ShadingRenderer(v, f, patch, INTR, spp=16)
     bulb = ShadingRenderer(v, f, patch, INTR, spp=16, optics=BULB)
     points = plate_points(INTR, POSE)
@@ -85,7 +65,7 @@ def test_sphere_of_equal_power_is_the_point_light_seen_from_far() -> None:
 
 
 def test_bulb_reaching_over_the_horizon_lights_what_the_point_cannot() -> None:
-    v, f, patch = scene(PLATE)
+    v, f, patch = join(PLATE)
     light = np.array([0.15, 0.0, -0.01])  # centre just below the plate's plane, beside it
     point = ShadingRenderer(v, f, patch, INTR, spp=16).render(POSE, light)[0]
     bulb = ShadingRenderer(v, f, patch, INTR, spp=64, optics=BULB).render(POSE, light)[0]
@@ -99,7 +79,7 @@ def test_bulb_reaching_over_the_horizon_lights_what_the_point_cannot() -> None:
 
 def test_bulb_casts_a_penumbra_the_point_light_does_not() -> None:
     wall = rectangle((0.0, -0.1, 0.0), (0.0, 0.2, 0.0), (0.0, 0.0, 0.05), 21)  # 5 cm high
-    v, f, patch = scene(PLATE, wall)
+    v, f, patch = join(PLATE, wall)
     intr = Intrinsics.pinhole(128, 96, 160.0)
     pose = Pose.look_at(np.array([0.0, 0.0, 0.3]), np.zeros(3), up=(0.0, 1.0, 0.0))
     light = np.array([0.05, 0.0, 0.2])  # shadow edge of the point light at x = -1/60 m
@@ -122,7 +102,7 @@ def test_bulb_casts_a_penumbra_the_point_light_does_not() -> None:
 
 
 def test_gloss_adds_a_highlight_at_the_mirror_point_and_little_elsewhere() -> None:
-    v, f, patch = scene(PLATE)
+    v, f, patch = join(PLATE)
     light = POSE.light_position(np.array([0.05, 0.0, 0.0]))
     glossy = ShadingRenderer(v, f, patch, INTR, spp=64, optics=PRESETS["gloss"])
     shading = glossy.render(POSE, light)
@@ -162,7 +142,7 @@ def test_falloff_gain_is_cos4_times_the_lens_polynomial() -> None:
 
 
 def test_cache_key_changes_with_every_rendered_switch(tmp_path: Path) -> None:
-    v, f, patch = scene(PLATE)
+    v, f, patch = join(PLATE)
     keys = {
         name: ShadingRenderer(v, f, patch, INTR, optics=optics, cache=tmp_path)._key
         for name, optics in PRESETS.items()
@@ -177,18 +157,10 @@ def test_cache_key_changes_with_every_rendered_switch(tmp_path: Path) -> None:
 def test_sessions_carry_the_gloss_and_the_falloff_into_their_raws(
     shared_data: Path, tmp_path: Path
 ) -> None:
-    from bench.external_scene import SceneSpec
     from bench.external_session import Size, build_session
     from reconstruct.frames.decode import decode_raw
 
-    spec = SceneSpec(
-        "smoke",
-        "spot.obj",
-        {"L1": "Sunwayfoto.LED.FL96.at.3000K", "L2": "Sunwayfoto.LED.FL96.at.5500K"},
-        "Nikon D700",
-        (1.0,),
-        (30.0,),
-    )
+    spec = replace(TINY, distance_factors=(1.0,))
     size = Size(width=64, height=48, focal_px=60.0, views=2, spp=8)
     frames = {}
     for name in ("ideal", "lens", "real"):
@@ -218,20 +190,12 @@ def test_flat_field_step_on_rendered_white_cards_recovers_the_lens_and_decode_re
     """`--flat-field`: the wizard's flat-field step photographs white cards Mitsuba renders
     through the lens (matte, under the scene's bulb); the fitted gain is the lens's, the
     session names it, decode divides; the profile gives the bulb's size."""
-    from bench.external_scene import SceneSpec
     from bench.external_session import FLAT_FIELD_NAME, Size, build_session
     from calibration.store import CalibrationStore
     from core.session import Session
     from reconstruct.frames.decode import session_flat_field
 
-    spec = SceneSpec(
-        "smoke",
-        "spot.obj",
-        {"L1": "Sunwayfoto.LED.FL96.at.3000K", "L2": "Sunwayfoto.LED.FL96.at.5500K"},
-        "Nikon D700",
-        (0.8, 1.2),
-        (30.0,),
-    )
+    spec = TINY
     optics = PRESETS["real-lens"]
     size = Size(width=64, height=48, focal_px=112.0, views=2, optics=optics, flat_field=True)
     session_dir = build_session(spec, size, tmp_path, shared_data, tmp_path / "cache")

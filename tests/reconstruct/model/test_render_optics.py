@@ -10,26 +10,7 @@ from reconstruct.model import render
 from reconstruct.model.bulb import cone_samples, rim_points
 from reconstruct.model.camera import Intrinsics, Pose
 from reconstruct.model.raycast import RayCaster
-
-
-def rectangle(corner: list[float], a: list[float], b: list[float], n: int) -> tuple[
-    np.ndarray, np.ndarray
-]:
-    s, t = (g.ravel()[:, None] for g in np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n)))
-    vertices = np.asarray(corner) + s * np.asarray(a) + t * np.asarray(b)
-    i = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).ravel()
-    faces = np.concatenate([np.stack([i, i + 1, i + n + 1], 1), np.stack([i, i + n + 1, i + n], 1)])
-    return vertices, faces
-
-
-def join(*parts: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    vertices, faces, offset = [], [], 0
-    for v, f in parts:
-        vertices.append(v)
-        faces.append(f + offset)
-        offset += len(v)
-    return np.concatenate(vertices), np.concatenate(faces)
-
+from tests.plates import join, rectangle
 
 PLATE = rectangle([-0.1, -0.1, 0.0], [0.2, 0.0, 0.0], [0.0, 0.2, 0.0], 21)  # facing +z
 TOP = Pose.look_at(np.array([0.0, 0.0, 0.3]), np.zeros(3), up=(0.0, 1.0, 0.0))
@@ -71,7 +52,7 @@ def test_a_fully_seen_bulb_lights_as_the_point_at_its_centre() -> None:
 
 def test_a_bulb_casts_a_penumbra_and_lights_past_the_horizon() -> None:
     wall = rectangle([0.0, -0.1, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, 0.05], 11)
-    caster, hits = hits_of(join(PLATE, wall))
+    caster, hits = hits_of(join(PLATE, wall)[:2])
     light = np.array([0.05, 0.0, 0.2])  # the point's shadow ends at x = -1/60 m
     point = render.light_weight(caster, hits, light)
     bulb = render.light_weight(caster, hits, light, radius=0.03)

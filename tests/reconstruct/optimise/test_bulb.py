@@ -12,16 +12,7 @@ from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.problem_setup import build_problem, light_positions, rim_hidden
 from reconstruct.optimise.settings import OptimiseSettings
 from reconstruct.optimise.synthetic import SyntheticScene
-
-
-def rectangle(corner: list[float], a: list[float], b: list[float], n: int) -> tuple[
-    np.ndarray, np.ndarray
-]:
-    s, t = (g.ravel()[:, None] for g in np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n)))
-    vertices = np.asarray(corner) + s * np.asarray(a) + t * np.asarray(b)
-    i = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).ravel()
-    faces = np.concatenate([np.stack([i, i + 1, i + n + 1], 1), np.stack([i, i + n + 1, i + n], 1)])
-    return vertices, faces
+from tests.plates import rectangle
 
 
 def test_rim_rays_find_the_penumbra_the_centre_ray_misses() -> None:
