@@ -145,12 +145,24 @@ def score(session: Path, recon: Path) -> dict[str, Any]:
         truth / "reflectance.npy",
         None if offset is None else np.asarray(offset, dtype=float),
     )
+    # ΔE00 per illuminant (D65, A): per-patch mean and per-vertex mean
+    colour = {c["illuminant"]: (c["patch_mean"], c["per_vertex"]["mean"]) for c in ev.colour}
     return {
         "accuracy_mm": ev.accuracy_m * 1e3,
         "completeness_mm": ev.completeness_m * 1e3,
         "rmse": ev.spectral_rmse,
+        "outside_unit_range": ev.outside_unit_range,
+        "delta_e00": colour,
         "light_mm": None if ev.light_offset_error_m is None else ev.light_offset_error_m * 1e3,
     }
+
+
+def _delta_e(score: dict[str, Any], which: int) -> str:
+    """ "D65 / A" ΔE00 means of a score (which: 0 per patch, 1 per vertex); "" for runs saved
+    before the bench scored colour."""
+    colour = score.get("delta_e00") or {}
+    values = [colour[k][which] for k in ("D65", "A") if k in colour]
+    return " / ".join("–" if v is None else f"{v:.2f}" for v in values)
 
 
 def tables(runs: list[dict[str, Any]], size: Size) -> list[ResultTable]:
@@ -172,6 +184,8 @@ def tables(runs: list[dict[str, Any]], size: Size) -> list[ResultTable]:
             "accuracy (mm)",
             "completeness (mm)",
             "spectral RMSE",
+            "ΔE00 D65 / A patch",
+            "ΔE00 D65 / A vertex",
             "light error (mm)",
             "intermediates",
             "met",
@@ -201,6 +215,8 @@ def tables(runs: list[dict[str, Any]], size: Size) -> list[ResultTable]:
             sc["accuracy_mm"],
             sc["completeness_mm"],
             sc["rmse"],
+            _delta_e(sc, 0),
+            _delta_e(sc, 1),
             sc["light_mm"],
             f"{disk.get('total', 0):.0f} MB ({disk.get('left', 0):.0f} left)",
             met,

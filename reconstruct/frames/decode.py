@@ -19,7 +19,10 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Mapping
+import os
+from collections import deque
+from collections.abc import Iterator, Mapping
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -50,6 +53,7 @@ INDEX = "index.json"
 SFM_DIR = "sfm"
 FLOAT16_RANGE = 6e4  # largest value a frame may hold to be kept as float16 (max 65504)
 LINEAR_SUFFIXES = {".npy", ".tif", ".tiff"}
+DECODE_THREADS = 4  # at most; one per core below that
 
 
 @dataclass(frozen=True)
@@ -288,6 +292,39 @@ def _decode_one(
     return rgb, mask, level
 
 
+def _decode_in_order(
+    session: Session,
+    records: list[FrameRecord],
+    conf: DecodeConfig,
+    flat: FlatFieldDivider | None,
+    max_side: int,
+) -> Iterator[tuple[FrameRecord, tuple[np.ndarray, np.ndarray, int] | Exception]]:
+    """Each record with its decoded frame, or the error that made it unusable, in order.
+    Frames decode on one thread per core (LibRaw, OpenCV and NumPy release the GIL), at most
+    two per thread ahead of the caller, so a long session never holds more than a few frames."""
+    threads = max(1, min(DECODE_THREADS, os.cpu_count() or 1))
+
+    def one(record: FrameRecord) -> tuple[np.ndarray, np.ndarray, int] | Exception:
+        try:
+            return _decode_one(session, record, conf, flat, max_side)
+        except (rawpy.LibRawError, OSError, ValueError) as exc:
+            return exc
+
+    pool = ThreadPoolExecutor(threads, thread_name_prefix="decode")
+    pending: deque[tuple[FrameRecord, Future[Any]]] = deque()
+    try:
+        for record in records:
+            pending.append((record, pool.submit(one, record)))
+            if len(pending) >= 2 * threads:
+                head, future = pending.popleft()
+                yield head, future.result()
+        while pending:
+            head, future = pending.popleft()
+            yield head, future.result()
+    finally:  # a stop or an error downstream: frames not started are not decoded
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
 def tone_map(images: list[np.ndarray], max_side: int = 0) -> list[np.ndarray]:
     """Linear images -> 8-bit sRGB-like copies with one common exposure (for SIFT)."""
     scale = max(float(np.percentile(img, 99.5)) for img in images) or 1.0
@@ -338,15 +375,14 @@ def _decode(
     _bad(conf, bad)
     frames: list[DecodedFrame] = []
     best: dict[int, tuple[float, np.ndarray]] = {}  # view -> (score, image) for SfM
-    for record in track(
-        [r for r in session.frames if r.path not in bad], description="decoding frames"
-    ):
-        try:
-            rgb, mask, level = _decode_one(session, record, conf, flat, max_side)
-        except (rawpy.LibRawError, OSError, ValueError) as exc:
-            bad[record.path] = f"cannot be decoded: {exc}"
+    records = [r for r in session.frames if r.path not in bad]
+    decoded = _decode_in_order(session, records, conf, flat, max_side)
+    for record, result in track(decoded, description="decoding frames", total=len(records)):
+        if isinstance(result, Exception):
+            bad[record.path] = f"cannot be decoded: {result}"
             _bad(conf, {record.path: bad[record.path]})
             continue
+        rgb, mask, level = result
         stem = f"frame_{record.frame:05d}"
         # float16 halves the cache (3 significant digits, below sensor noise) unless the
         # exposure normalisation pushes values past its range (65504)

@@ -63,9 +63,11 @@ class RawMosaic:
 
     def clipped(self, fraction: float, window: Window = WHOLE) -> np.ndarray:
         """Pixels of ``window`` whose level is at or above ``fraction`` of full scale."""
-        black = self.black(window)
-        span = np.float32(self.white) - black
-        return (self.values[window].astype(np.float32) - black) >= fraction * span
+        threshold = self.channel_black + fraction * (self.white - self.channel_black)
+        if np.issubdtype(self.values.dtype, np.integer):
+            # value >= x exactly when value >= ceil(x): compared in the samples' own type
+            threshold = np.ceil(threshold).astype(self.values.dtype)
+        return self.values[window] >= threshold[self.colours[window]]
 
 
 def _mosaic(raw: rawpy.RawPy) -> RawMosaic:

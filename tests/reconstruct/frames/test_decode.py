@@ -82,13 +82,14 @@ def test_saturation_mask_covers_clipped_neighbourhoods(shared_data: Path) -> Non
     assert mask.mean() < 0.5
 
 
-def _session(tmp_path: Path, frames: int = 3) -> Path:
+def _session(tmp_path: Path, frames: int = 3, flat: tuple[int, ...] = ()) -> Path:
+    """Linear NPY frames; those in ``flat`` lack their colour axis (undecodable)."""
     root = tmp_path / "s"
     (root / "raw").mkdir(parents=True)
     (root / "session.yaml").write_text("rig: test\n")
     rng = np.random.default_rng(0)
     for k in range(frames):
-        img = rng.integers(0, 4096, (8, 10, 3)).astype(np.uint16)
+        img = rng.integers(0, 4096, (8, 10) if k in flat else (8, 10, 3)).astype(np.uint16)
         img[0, 0] = 4095
         rel = f"raw/f{k}.npy"
         np.save(root / rel, img)
@@ -139,6 +140,18 @@ def test_corrupt_raw_with_matching_hash_is_reported(
     assert index.skipped["raw/broken.dng"].startswith("cannot be decoded")
     with pytest.raises(RigError, match=r"raw/broken\.dng"):
         decode.run({"on_bad_frame": "stop"}, root, root / "recon" / "decoded2")
+
+
+def test_frames_decoded_in_parallel_keep_their_order(tmp_path: Path) -> None:
+    """More frames than the decode threads run ahead, one undecodable early on: the index
+    keeps the manifest's order and names the bad frame; a stop on it leaves no index."""
+    root = _session(tmp_path, 12, flat=(2,))
+    index = DecodeIndex.load(decode.run({}, root, root / "recon" / "decoded"))
+    assert [f.frame for f in index.frames] == [k for k in range(12) if k != 2]
+    assert index.skipped["raw/f2.npy"].startswith("cannot be decoded: expected an H x W x 3")
+    with pytest.raises(RigError, match=r"raw/f2\.npy"):
+        decode.run({"on_bad_frame": "stop"}, root, root / "recon" / "decoded2")
+    assert not (root / "recon" / "decoded2" / "index.json").exists()
 
 
 def test_config_is_checked() -> None:
