@@ -52,7 +52,12 @@ from reconstruct.outputs.relight import Camera, encode_srgb, relight
 from reconstruct.run.front import FrontConfig, FrontResult, run_front
 from reconstruct.run.status import RunStatus, tracked
 from reconstruct.stages.disk import stage_sizes_mb
-from reconstruct.stages.memory import peak_rss_mb, reset_peak_rss
+from reconstruct.stages.memory import (
+    memory_within_reach_gb,
+    peak_rss_mb,
+    reset_peak_rss,
+    solve_memory_gb,
+)
 from reconstruct.stages.publish import publish, staging_dir
 from reconstruct.stages.resolution import level_size
 from reconstruct.stages.resumable import Timings, timed_run
@@ -441,6 +446,26 @@ def warn_if_light_distance_weak(distances: dict[str, float], light_mode: str) ->
     )
 
 
+def warn_if_solve_exceeds_memory(inp: OptimiseInput) -> None:
+    """Tell the user, before the long solve, when it will likely need more memory than the
+    machine has left: the system would otherwise stop it without a word, minutes in."""
+    per_view = np.count_nonzero(inp.visibility, axis=0)
+    pairs = int(per_view[inp.frames.view].sum())
+    held = sum(a.nbytes for a in (inp.frames.images, inp.frames.valid) if a is not None)
+    need, have = solve_memory_gb(pairs, held), memory_within_reach_gb()
+    if need <= have:
+        return
+    log.warning(
+        "the joint solve needs about %.1f GB (%d vertices, %d vertex-frame pairs) and this "
+        "machine has %.1f GB left: it may be stopped for lack of memory; a coarser --detail "
+        "(or a larger --edge-mm: twice the edge, a quarter of the pairs) keeps it smaller",
+        need,
+        len(inp.vertices),
+        pairs,
+        have,
+    )
+
+
 def projector_lights(
     front: FrontResult, settings: OptimiseSettings, explicit_mode: bool
 ) -> np.ndarray | None:
@@ -507,6 +532,7 @@ def _run(
     t_load = time.perf_counter() - t0
     distances = camera_distances(inp)
     warn_if_light_distance_weak(distances, settings.light_mode)
+    warn_if_solve_exceeds_memory(inp)
     recon = session.recon_dir
     t0 = time.perf_counter()
     status.stage("optimise")

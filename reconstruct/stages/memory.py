@@ -12,6 +12,14 @@ import resource
 import sys
 from pathlib import Path
 
+import psutil
+
+# The joint solve's resident memory besides the frames it samples: a fixed part and a part per
+# million (vertex, frame) pairs the visibility allows, in GB (10⁹ bytes); fitted to
+# bench.real_size's runs from 40k to 573k vertices (bench/README.md), a little above each.
+SOLVE_BASE_GB = 1.0
+SOLVE_GB_PER_MILLION_PAIRS = 0.5
+
 _STATUS = Path("/proc/self/status")
 _CLEAR_REFS = Path("/proc/self/clear_refs")
 
@@ -35,3 +43,18 @@ def peak_rss_mb() -> float:
         pass
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # KiB on Linux, bytes on macOS
     return peak / 1e6 if sys.platform == "darwin" else peak * 1024 / 1e6
+
+
+def solve_memory_gb(pairs: int, frame_bytes: int) -> float:
+    """The joint solve's expected peak resident memory in GB: the frames it holds
+    (``frame_bytes``) and the visible (vertex, frame) ``pairs`` it may observe.
+
+    >>> round(solve_memory_gb(10_000_000, 600_000_000), 1)
+    6.6
+    """
+    return SOLVE_BASE_GB + SOLVE_GB_PER_MILLION_PAIRS * pairs / 1e6 + frame_bytes / 1e9
+
+
+def memory_within_reach_gb() -> float:
+    """What this process holds now plus what the system can still give it, in GB."""
+    return (psutil.Process().memory_info().rss + psutil.virtual_memory().available) / 1e9
