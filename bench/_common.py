@@ -22,6 +22,7 @@ from rich.table import Table
 
 from calibration.colour_difference import DEFAULT_ILLUMINANTS
 from calibration.grid import DEFAULT_GRID
+from core.machine import usable_cores
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_OUT = REPO / "bench" / "results"
@@ -48,12 +49,11 @@ def total_ram_gb() -> float:
 
 def machine_info() -> dict[str, Any]:
     """Enough to tell whether two result tables are comparable."""
-    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return {
         "date_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
         "cpu_model": cpu_model(),
         "cpu_count": os.cpu_count(),
-        "cpus_usable": usable,
+        "cpus_usable": usable_cores(),
         "ram_gb": round(total_ram_gb(), 1),
         "platform": platform.platform(),
         "python": platform.python_version(),

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 from collections import deque
 from collections.abc import Iterator, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -39,6 +38,7 @@ from calibration.store import CalibrationStore
 from core.config import bounded, from_mapping
 from core.errors import RigError
 from core.files import atomic_output, write_bytes_atomically
+from core.machine import usable_cores
 from core.manifest import MANIFEST_FILE, FrameRecord, verify_frames
 from core.manifest_check import check_session
 from core.session import Session
@@ -302,7 +302,7 @@ def _decode_in_order(
     """Each record with its decoded frame, or the error that made it unusable, in order.
     Frames decode on one thread per core (LibRaw, OpenCV and NumPy release the GIL), at most
     two per thread ahead of the caller, so a long session never holds more than a few frames."""
-    threads = max(1, min(DECODE_THREADS, os.cpu_count() or 1))
+    threads = min(DECODE_THREADS, usable_cores())
 
     def one(record: FrameRecord) -> tuple[np.ndarray, np.ndarray, int] | Exception:
         try:

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import psutil
 
-# The joint solve's resident memory besides the frames it samples: a fixed part and a part per
-# million (vertex, frame) pairs the visibility allows, in GB (10⁹ bytes); fitted to
-# bench.real_size's runs from 40k to 573k vertices (bench/README.md), a little above each.
+# The joint solve's resident memory besides the frames it samples, in GB (10⁹ bytes): a fixed
+# part and a part per million (vertex, frame) pairs the visibility allows. Fitted to
+# bench.real_size's runs and kept on the high side, since a warning too late loses the run.
 SOLVE_BASE_GB = 1.0
 SOLVE_GB_PER_MILLION_PAIRS = 0.5
 

@@ -7,7 +7,6 @@ has no dashboard."""
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -15,6 +14,7 @@ import psutil
 from distributed import Client, LocalCluster
 
 from core.errors import RigError
+from core.machine import usable_cores
 
 # What one reconstruction of a demo-sized session (20 views, 60k faces) needs, with margin.
 WORKER_MEMORY = 4 * 2**30
@@ -23,9 +23,9 @@ WORKER_MEMORY = 4 * 2**30
 def local_size(workers: int | None) -> tuple[int, int]:
     """Number of workers and memory limit per worker (bytes) on this machine."""
     memory = int(psutil.virtual_memory().total)
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    cores = usable_cores()
     if workers is None:
-        workers = max(1, min(int(cores or 1), memory // WORKER_MEMORY))
+        workers = max(1, min(cores, memory // WORKER_MEMORY))
     return workers, memory // workers
 
 

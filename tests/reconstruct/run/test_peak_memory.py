@@ -63,11 +63,11 @@ def test_a_solve_larger_than_the_memory_left_is_warned_of(
 ) -> None:
     visibility = np.ones((1000, 4), bool)
     visibility[:500, 3] = False  # view 3 sees half the vertices
-    frames = Frames(np.repeat(np.arange(4), 2), np.tile([0, 1], 4),
-                    np.zeros((8, 6, 8, 3), np.float16))
+    images, valid = np.zeros((8, 6, 8, 3), np.float16), np.ones((8, 6, 8), bool)
+    frames = Frames(np.repeat(np.arange(4), 2), np.tile([0, 1], 4), images, valid)
     inp = cast(OptimiseInput, SimpleNamespace(vertices=np.zeros((1000, 3)),
                                               visibility=visibility, frames=frames))
-    need = solve_memory_gb(7000, frames.images.nbytes + frames.valid.nbytes)  # type: ignore[union-attr]
+    need = solve_memory_gb(7000, images.nbytes + valid.nbytes)  # 7000: (3 × 1000 + 500) × 2
     monkeypatch.setattr(pipeline, "memory_within_reach_gb", lambda: need - 0.01)
     with caplog.at_level(logging.WARNING, logger="reconstruct"):
         pipeline.warn_if_solve_exceeds_memory(inp)
