@@ -231,3 +231,31 @@ def test_a_third_lamp_is_a_third_illumination_that_lowers_the_floor(
     assert floors[1]["rmse_mean"] < 0.9 * floors[0]["rmse_mean"]
     d65 = [f["colour"][0]["per_vertex"]["mean"] for f in floors]
     assert d65[1] < 0.7 * d65[0]
+
+
+def test_on_surface_colour_scores_only_vertices_on_the_true_surface(tmp_path: Path) -> None:
+    import trimesh
+
+    from bench.external import ON_SURFACE_M, on_surface_colour
+    from calibration.defaults import colorchecker_reflectances
+
+    vertices, faces, patch = plate()
+    truth = tmp_path / "truth"
+    truth.mkdir()
+    trimesh.Trimesh(vertices, faces, process=False).export(truth / "mesh.ply")
+    reflectance = colorchecker_reflectances()[1][[2, 7]][patch]  # blue sky | orange
+    np.save(truth / "reflectance.npy", reflectance)
+    np.save(truth / "patch.npy", patch)
+    # the right colour on the surface; a quarter of the vertices lifted off it, and grey
+    lifted = np.arange(len(vertices)) % 4 == 0
+    moved = vertices + np.where(lifted, 4 * ON_SURFACE_M, 0.0)[:, None] * np.array([0, 0, 1.0])
+    estimate = np.where(lifted[:, None], 0.5, reflectance)
+    npz = _write_npz(tmp_path / "r.npz", moved, faces, estimate, np.ones(len(vertices), bool))
+    near = on_surface_colour(npz, truth)
+    assert near["share"] == pytest.approx(1 - lifted.mean())
+    assert near["rmse_mean"] == pytest.approx(0.0, abs=1e-6)
+    for report in near["colour"]:
+        assert report["per_vertex"]["mean"] == pytest.approx(0.0, abs=1e-3)
+        assert [p["vertices"] for p in report["patches"]] == [
+            int(np.sum(~lifted & (patch == k))) for k in (0, 1)
+        ]
