@@ -446,12 +446,14 @@ def warn_if_light_distance_weak(distances: dict[str, float], light_mode: str) ->
     )
 
 
-def warn_if_solve_exceeds_memory(inp: OptimiseInput) -> None:
+def warn_if_solve_exceeds_memory(inp: OptimiseInput, settings: OptimiseSettings) -> None:
     """Tell the user, before the long solve, when it will likely need more memory than the
     machine has left: the system would otherwise stop it without a word, minutes in."""
     per_view = np.count_nonzero(inp.visibility, axis=0)
     pairs = int(per_view[inp.frames.view].sum())
     held = sum(a.nbytes for a in (inp.frames.images, inp.frames.valid) if a is not None)
+    if settings.coarse_blur_px > 0 and inp.frames.images is not None:
+        held *= 2  # the coarse stages sample a blurred copy of the frames beside them
     need, have = solve_memory_gb(pairs, held), memory_within_reach_gb()
     if need <= have:
         return
@@ -532,7 +534,7 @@ def _run(
     t_load = time.perf_counter() - t0
     distances = camera_distances(inp)
     warn_if_light_distance_weak(distances, settings.light_mode)
-    warn_if_solve_exceeds_memory(inp)
+    warn_if_solve_exceeds_memory(inp, settings)
     recon = session.recon_dir
     t0 = time.perf_counter()
     status.stage("optimise")

@@ -15,7 +15,7 @@ import pytest
 from recon_tiny import make_session, reconstruct_args
 
 from reconstruct.optimise.problem import Frames
-from reconstruct.optimise.settings import OptimiseInput
+from reconstruct.optimise.settings import OptimiseInput, OptimiseSettings
 from reconstruct.outputs import export
 from reconstruct.run import pipeline
 from reconstruct.stages.memory import (
@@ -70,11 +70,17 @@ def test_a_solve_larger_than_the_memory_left_is_warned_of(
     need = solve_memory_gb(7000, images.nbytes + valid.nbytes)  # 7000: (3 × 1000 + 500) × 2
     monkeypatch.setattr(pipeline, "memory_within_reach_gb", lambda: need - 0.01)
     with caplog.at_level(logging.WARNING, logger="reconstruct"):
-        pipeline.warn_if_solve_exceeds_memory(inp)
+        pipeline.warn_if_solve_exceeds_memory(inp, OptimiseSettings())
     assert "1000 vertices, 7000 vertex-frame pairs" in caplog.text
     assert "coarser --detail" in caplog.text
     caplog.clear()
-    monkeypatch.setattr(pipeline, "memory_within_reach_gb", lambda: need + 0.01)
+    # more than the solve needs, less than it needs with a second copy of the frames
+    frames_gb = (images.nbytes + valid.nbytes) / 1e9
+    monkeypatch.setattr(pipeline, "memory_within_reach_gb", lambda: need + frames_gb / 2)
     with caplog.at_level(logging.WARNING, logger="reconstruct"):
-        pipeline.warn_if_solve_exceeds_memory(inp)
+        pipeline.warn_if_solve_exceeds_memory(inp, OptimiseSettings())
     assert not caplog.records
+    # blurred first stages sample a blurred copy of the frames beside them
+    with caplog.at_level(logging.WARNING, logger="reconstruct"):
+        pipeline.warn_if_solve_exceeds_memory(inp, OptimiseSettings(coarse_blur_px=2.0))
+    assert "1000 vertices, 7000 vertex-frame pairs" in caplog.text
