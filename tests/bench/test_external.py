@@ -259,3 +259,23 @@ def test_on_surface_colour_scores_only_vertices_on_the_true_surface(tmp_path: Pa
         assert [p["vertices"] for p in report["patches"]] == [
             int(np.sum(~lifted & (patch == k))) for k in (0, 1)
         ]
+    # the benchmark's colour table shows the row beside the whole reconstruction's
+    from bench.external import tables
+
+    stats = {f"{k}_{s}": 0.001 for k in ("acc", "comp") for s in ("mean", "median", "p90")}
+    brightness = {"all": 1.0, "in_band": 1.0, "out_of_band": 1.0, "band_first_nm": 420.0,
+                  "band_last_nm": 660.0}  # fmt: skip
+    other = near["colour"]  # any colour report fills the table's other rows
+    result = {
+        "scene": "plate", "mesh": "plate.ply", "initial": stats, "final": stats,
+        "rmse_mean": 0.1, "rmse_median": 0.1, "oracle_rmse_mean": 0.05, "rmse_per_patch": {0: 0.1},
+        "outside_unit_range": 0, "light_offset_error_m": None, "colour": other,
+        "on_surface": near, "oracle_colour": other,
+        "floor": {"rmse_mean": 0.02, "colour": other, "brightness": brightness},
+        "brightness": brightness, "oracle_brightness": brightness,
+        "timings_s": {}, "render_s": 1.0, "peak_rss_mb": 1.0,
+    }  # fmt: skip
+    colour = next(t for t in tables([result]) if t.title.startswith("Colour"))
+    row = next(r for r in colour.rows if "true surface" in r[1])
+    assert "within 0.5 mm" in row[1] and "(75% of its vertices)" in row[1]
+    assert row[3].startswith("0.00 / 0.00")  # ΔE00 D65 per vertex mean / median / p90
