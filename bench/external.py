@@ -156,26 +156,16 @@ def on_surface_colour(npz: Path, truth: Path) -> dict[str, Any]:
     surface it is not on)."""
     from calibration.colour_difference import DEFAULT_ILLUMINANTS, illuminant
     from reconstruct.outputs import export
-    from reconstruct.outputs.evaluate import (
-        colour_reports,
-        interpolate_at,
-        load_mesh,
-        nearest_corner,
-        surface_distance,
-        truth_patches,
-    )
+    from reconstruct.outputs.evaluate import colour_reports, load_mesh, truth_at, truth_patches
 
     data = export.read_reflectance_npz(npz)
     vertices = np.asarray(data["vertices"], dtype=float)
     observed = np.asarray(data.get("observed", np.ones(len(vertices))), dtype=bool)
     gt = load_mesh(truth / "mesh.ply")
-    gt_reflectance = np.load(truth / "reflectance.npy")
-    d, closest, tri = surface_distance(vertices, gt)
-    near = observed & (d <= ON_SURFACE_M)
     labels = truth_patches(truth / "reflectance.npy", len(gt.vertices))
-    patch = None if labels is None else labels[nearest_corner(gt, closest, tri)]
+    d, reference, patch = truth_at(vertices, gt, np.load(truth / "reflectance.npy"), labels)
+    near = observed & (d <= ON_SURFACE_M)
     estimate = np.asarray(data["reflectance"], dtype=float)
-    reference = interpolate_at(gt, gt_reflectance, closest, tri)
     rmse = np.sqrt(np.mean((estimate - reference) ** 2, axis=1))
     colour = colour_reports(
         estimate,

@@ -218,6 +218,20 @@ def nearest_corner(mesh: trimesh.Trimesh, points: np.ndarray, tri: np.ndarray) -
     return corners[np.arange(len(points)), np.argmin(d, axis=1)]
 
 
+def truth_at(
+    points: np.ndarray,
+    gt: trimesh.Trimesh,
+    gt_reflectance: np.ndarray,
+    gt_patch: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """For each reconstructed point: its distance to the true surface, the true reflectance at
+    the closest surface point, and that point's patch label (None without labels)."""
+    distance, closest, tri = surface_distance(points, gt)
+    reflectance = interpolate_at(gt, gt_reflectance, closest, tri)
+    patch = None if gt_patch is None else gt_patch[nearest_corner(gt, closest, tri)]
+    return distance, reflectance, patch
+
+
 def error_map(
     path: Path, vertices: np.ndarray, faces: np.ndarray, errors: np.ndarray, vmax: float
 ) -> Path:
@@ -300,13 +314,11 @@ def _evaluate(
             f"(first: vertex {bad[0]})",
             "give a finite reflectance for every vertex of the ground-truth mesh",
         )
-    d_acc, closest, tri = surface_distance(X, gt)
+    gt_patch = truth_patches(Path(gt_reflectance), len(gt.vertices))
+    d_acc, truth, patch = truth_at(X, gt, gt_refl, gt_patch)
     recon_mesh = trimesh.Trimesh(X, faces, process=False)
     d_comp, _, _ = surface_distance(np.asarray(gt.vertices, dtype=float), recon_mesh)
-    truth = interpolate_at(gt, gt_refl, closest, tri)
     rmse = np.sqrt(np.mean((refl - truth) ** 2, axis=1))
-    gt_patch = truth_patches(Path(gt_reflectance), len(gt.vertices))
-    patch = None if gt_patch is None else gt_patch[nearest_corner(gt, closest, tri)]
     lights = illuminants or [illuminant(n) for n in DEFAULT_ILLUMINANTS]
     colour = colour_reports(refl, truth, observed, patch, lights)
     ev = Evaluation(
