@@ -106,6 +106,10 @@ BUDGETS: dict[str, dict[str, Any]] = {
 
 # the colour where the shape is right: vertices this close to the true surface (metres)
 ON_SURFACE_M = 0.5e-3
+# the colour inside the patches: vertices whose closest true point is at least this far from a
+# border between two patches, along the true surface (metres); nearer, a pixel (0.3–0.6 mm on
+# the object at --size full) mixes the two paints
+PAINT_EDGE_M = 1.0e-3
 
 
 def distances(points: np.ndarray, mesh_path: Path) -> np.ndarray:
@@ -149,11 +153,33 @@ def per_patch_rmse(npz: Path, out: Path, truth: Path) -> dict[int, float]:
     return {int(k): float(rmse[observed & (p == k)].mean()) for k in np.unique(p[observed])}
 
 
-def on_surface_colour(npz: Path, truth: Path) -> dict[str, Any]:
-    """Spectral RMSE and ΔE00 (D65, A) of the observed vertices within :data:`ON_SURFACE_M` of
-    the true surface, and their share of the observed ones: the colour where the shape is
-    right, apart from what misplaced geometry costs it (a vertex 2 mm off takes the truth of a
-    surface it is not on)."""
+def paint_edge_distance(gt: Any, labels: np.ndarray) -> np.ndarray:
+    """Distance along the edges of the true mesh ``gt`` from each of its vertices to the
+    nearest vertex on a border between two patches of ``labels`` (inf with a single patch)."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import dijkstra
+
+    edges = np.asarray(gt.edges_unique)
+    border = np.zeros(len(gt.vertices), dtype=bool)
+    border[edges[labels[edges[:, 0]] != labels[edges[:, 1]]].ravel()] = True
+    if not border.any():
+        return np.full(len(gt.vertices), np.inf)
+    n = len(gt.vertices)
+    graph = sp.csr_array((np.asarray(gt.edges_unique_length), (edges[:, 0], edges[:, 1])),
+                         shape=(n, n))  # fmt: skip
+    return np.asarray(dijkstra(graph, directed=False, indices=np.nonzero(border)[0],
+                               min_only=True))  # fmt: skip
+
+
+def colour_where(
+    npz: Path, truth: Path, max_surface_m: float = np.inf, min_paint_edge_m: float = 0.0
+) -> dict[str, Any]:
+    """Spectral RMSE and ΔE00 (D65, A) of the observed vertices within ``max_surface_m`` of the
+    true surface whose closest true point is at least ``min_paint_edge_m`` from a paint edge,
+    and their share of the observed ones. Within :data:`ON_SURFACE_M`: the colour where the
+    shape is right, apart from what misplaced geometry costs it (a vertex 2 mm off takes the
+    truth of a surface it is not on); beyond :data:`PAINT_EDGE_M` from an edge: the colour
+    apart from what the images' resolution costs it where two paints meet."""
     from calibration.colour_difference import DEFAULT_ILLUMINANTS, illuminant
     from reconstruct.outputs import export
     from reconstruct.outputs.evaluate import colour_reports, load_mesh, truth_at, truth_patches
@@ -163,20 +189,22 @@ def on_surface_colour(npz: Path, truth: Path) -> dict[str, Any]:
     observed = np.asarray(data.get("observed", np.ones(len(vertices))), dtype=bool)
     gt = load_mesh(truth / "mesh.ply")
     labels = truth_patches(truth / "reflectance.npy", len(gt.vertices))
-    d, reference, patch = truth_at(vertices, gt, np.load(truth / "reflectance.npy"), labels)
-    near = observed & (d <= ON_SURFACE_M)
+    d, reference, corner = truth_at(vertices, gt, np.load(truth / "reflectance.npy"))
+    keep = observed & (d <= max_surface_m)
+    if labels is not None and min_paint_edge_m > 0:
+        keep &= paint_edge_distance(gt, labels)[corner] >= min_paint_edge_m
     estimate = np.asarray(data["reflectance"], dtype=float)
     rmse = np.sqrt(np.mean((estimate - reference) ** 2, axis=1))
     colour = colour_reports(
         estimate,
         reference,
-        near,
-        patch,
+        keep,
+        None if labels is None else labels[corner],
         [illuminant(name) for name in DEFAULT_ILLUMINANTS],
     )
     return {
-        "share": float(near.sum() / max(int(observed.sum()), 1)),
-        "rmse_mean": float(rmse[near].mean()) if near.any() else float("nan"),
+        "share": float(keep.sum() / max(int(observed.sum()), 1)),
+        "rmse_mean": float(rmse[keep].mean()) if keep.any() else float("nan"),
         "colour": [c.as_dict() for c in colour],
     }
 
@@ -247,11 +275,15 @@ def run_scene(
         "rmse_median": final["rmse_median"],
         "rmse_per_patch": per_patch_rmse(rec.reflectance_path, final_dir, truth),
         "outside_unit_range": final["outside_unit_range"],
-        "on_surface": on_surface_colour(rec.reflectance_path, truth),
+        "on_surface": colour_where(rec.reflectance_path, truth, max_surface_m=ON_SURFACE_M),
+        "inside_patches": colour_where(rec.reflectance_path, truth, min_paint_edge_m=PAINT_EDGE_M),
         "oracle_rmse_mean": oracle["rmse_mean"],
         "oracle_rmse_median": oracle["rmse_median"],
         "colour": final["colour"],
         "oracle_colour": oracle["colour"],
+        "oracle_inside_patches": colour_where(
+            folder / "oracle" / "reflectance.npz", truth, min_paint_edge_m=PAINT_EDGE_M
+        ),
         "floor": information_floor(session),
         "brightness": reflectance_brightness(rec.reflectance_path, session),
         "oracle_brightness": reflectance_brightness(folder / "oracle" / "reflectance.npz", session),
@@ -311,13 +343,21 @@ def tables(results: list[dict[str, Any]]) -> list[ResultTable]:
             f"{name} ({worst[1]:.3f})", str(r.get("outside_unit_range", "-")),
             _mm(r["light_offset_error_m"]),
         )  # fmt: skip
-        colour.add(r["scene"], "reconstruction", fmt(r["rmse_mean"]), *colour_cells(r["colour"]))
-        near = r["on_surface"]
-        colour.add(r["scene"], f"reconstruction, within {ON_SURFACE_M * 1e3:.1f} mm of the "
-                   f"true surface ({near['share']:.0%} of its vertices)", fmt(near["rmse_mean"]),
-                   *colour_cells(near["colour"]))  # fmt: skip
-        colour.add(r["scene"], "oracle (true shape and light, per vertex)",
-                   fmt(r["oracle_rmse_mean"]), *colour_cells(r["oracle_colour"]))  # fmt: skip
+        inside = f"{PAINT_EDGE_M * 1e3:.1f} mm or more from a paint edge"
+        near, within = r["on_surface"], r["inside_patches"]
+        oracle_within = r["oracle_inside_patches"]
+        for method, rmse, cells in (
+            ("reconstruction", r["rmse_mean"], r["colour"]),
+            (f"reconstruction, within {ON_SURFACE_M * 1e3:.1f} mm of the true surface "
+             f"({near['share']:.0%} of its vertices)", near["rmse_mean"], near["colour"]),
+            (f"reconstruction, {inside} ({within['share']:.0%})", within["rmse_mean"],
+             within["colour"]),
+            ("oracle (true shape and light, per vertex)", r["oracle_rmse_mean"],
+             r["oracle_colour"]),
+            (f"oracle, {inside} ({oracle_within['share']:.0%})", oracle_within["rmse_mean"],
+             oracle_within["colour"]),
+        ):  # fmt: skip
+            colour.add(r["scene"], method, fmt(rmse), *colour_cells(cells))
         colour.add(r["scene"], "information floor (2-D, true shading, no noise)",
                    fmt(r["floor"]["rmse_mean"]), *colour_cells(r["floor"]["colour"]))  # fmt: skip
         for method, b in (

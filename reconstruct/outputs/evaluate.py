@@ -219,17 +219,14 @@ def nearest_corner(mesh: trimesh.Trimesh, points: np.ndarray, tri: np.ndarray) -
 
 
 def truth_at(
-    points: np.ndarray,
-    gt: trimesh.Trimesh,
-    gt_reflectance: np.ndarray,
-    gt_patch: np.ndarray | None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    points: np.ndarray, gt: trimesh.Trimesh, gt_reflectance: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For each reconstructed point: its distance to the true surface, the true reflectance at
-    the closest surface point, and that point's patch label (None without labels)."""
+    the closest surface point, and the true vertex nearest that point (to look up a per-vertex
+    label such as the patch)."""
     distance, closest, tri = surface_distance(points, gt)
     reflectance = interpolate_at(gt, gt_reflectance, closest, tri)
-    patch = None if gt_patch is None else gt_patch[nearest_corner(gt, closest, tri)]
-    return distance, reflectance, patch
+    return distance, reflectance, nearest_corner(gt, closest, tri)
 
 
 def error_map(
@@ -315,7 +312,8 @@ def _evaluate(
             "give a finite reflectance for every vertex of the ground-truth mesh",
         )
     gt_patch = truth_patches(Path(gt_reflectance), len(gt.vertices))
-    d_acc, truth, patch = truth_at(X, gt, gt_refl, gt_patch)
+    d_acc, truth, corner = truth_at(X, gt, gt_refl)
+    patch = None if gt_patch is None else gt_patch[corner]
     recon_mesh = trimesh.Trimesh(X, faces, process=False)
     d_comp, _, _ = surface_distance(np.asarray(gt.vertices, dtype=float), recon_mesh)
     rmse = np.sqrt(np.mean((refl - truth) ** 2, axis=1))

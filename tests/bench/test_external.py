@@ -236,7 +236,7 @@ def test_a_third_lamp_is_a_third_illumination_that_lowers_the_floor(
 def test_on_surface_colour_scores_only_vertices_on_the_true_surface(tmp_path: Path) -> None:
     import trimesh
 
-    from bench.external import ON_SURFACE_M, on_surface_colour
+    from bench.external import ON_SURFACE_M, colour_where
     from calibration.defaults import colorchecker_reflectances
 
     vertices, faces, patch = plate()
@@ -251,7 +251,7 @@ def test_on_surface_colour_scores_only_vertices_on_the_true_surface(tmp_path: Pa
     moved = vertices + np.where(lifted, 4 * ON_SURFACE_M, 0.0)[:, None] * np.array([0, 0, 1.0])
     estimate = np.where(lifted[:, None], 0.5, reflectance)
     npz = _write_npz(tmp_path / "r.npz", moved, faces, estimate, np.ones(len(vertices), bool))
-    near = on_surface_colour(npz, truth)
+    near = colour_where(npz, truth, max_surface_m=ON_SURFACE_M)
     assert near["share"] == pytest.approx(1 - lifted.mean())
     assert near["rmse_mean"] == pytest.approx(0.0, abs=1e-6)
     for report in near["colour"]:
@@ -270,7 +270,8 @@ def test_on_surface_colour_scores_only_vertices_on_the_true_surface(tmp_path: Pa
         "scene": "plate", "mesh": "plate.ply", "initial": stats, "final": stats,
         "rmse_mean": 0.1, "rmse_median": 0.1, "oracle_rmse_mean": 0.05, "rmse_per_patch": {0: 0.1},
         "outside_unit_range": 0, "light_offset_error_m": None, "colour": other,
-        "on_surface": near, "oracle_colour": other,
+        "on_surface": near, "inside_patches": near, "oracle_colour": other,
+        "oracle_inside_patches": near,
         "floor": {"rmse_mean": 0.02, "colour": other, "brightness": brightness},
         "brightness": brightness, "oracle_brightness": brightness,
         "timings_s": {}, "render_s": 1.0, "peak_rss_mb": 1.0,
@@ -279,3 +280,35 @@ def test_on_surface_colour_scores_only_vertices_on_the_true_surface(tmp_path: Pa
     row = next(r for r in colour.rows if "true surface" in r[1])
     assert "within 0.5 mm" in row[1] and "(75% of its vertices)" in row[1]
     assert row[3].startswith("0.00 / 0.00")  # ΔE00 D65 per vertex mean / median / p90
+    assert sum("1.0 mm or more from a paint edge" in r[1] for r in colour.rows) == 2
+
+
+def test_colour_inside_patches_leaves_out_the_vertices_at_a_paint_edge(tmp_path: Path) -> None:
+    import trimesh
+
+    from bench.external import PAINT_EDGE_M, colour_where, paint_edge_distance
+    from calibration.defaults import colorchecker_reflectances
+
+    vertices, faces, patch = plate()
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    truth = tmp_path / "truth"
+    truth.mkdir()
+    mesh.export(truth / "mesh.ply")
+    reflectance = colorchecker_reflectances()[1][[2, 7]][patch]  # blue sky | orange
+    np.save(truth / "reflectance.npy", reflectance)
+    np.save(truth / "patch.npy", patch)
+    # the two columns either side of the border (5 mm apart) are on it; the next ones 5 mm off
+    edge = paint_edge_distance(mesh, patch)
+    column = np.round(vertices[:, 0] / 0.005).astype(int)
+    assert np.all(edge[np.isin(column, (-1, 0))] == 0)
+    assert edge[column == 1] == pytest.approx(0.005)
+    # a blur across the border: the two columns on it read the mean of both paints
+    at_edge = edge < PAINT_EDGE_M
+    blurred = np.where(at_edge[:, None], reflectance.mean(axis=0), reflectance)
+    npz = _write_npz(tmp_path / "r.npz", vertices, faces, blurred, np.ones(len(vertices), bool))
+    inside = colour_where(npz, truth, min_paint_edge_m=PAINT_EDGE_M)
+    everywhere = colour_where(npz, truth)
+    assert inside["share"] == pytest.approx(1 - at_edge.mean())
+    assert everywhere["share"] == 1.0
+    assert inside["colour"][0]["per_vertex"]["mean"] == pytest.approx(0.0, abs=1e-3)
+    assert everywhere["colour"][0]["per_vertex"]["mean"] > 0.1
