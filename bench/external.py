@@ -27,6 +27,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from bench._common import (
@@ -156,15 +158,12 @@ def per_patch_rmse(npz: Path, out: Path, truth: Path) -> dict[int, float]:
 def paint_edge_distance(gt: Any, labels: np.ndarray) -> np.ndarray:
     """Distance along the edges of the true mesh ``gt`` from each of its vertices to the
     nearest vertex on a border between two patches of ``labels`` (inf with a single patch)."""
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import dijkstra
-
+    n = len(gt.vertices)
     edges = np.asarray(gt.edges_unique)
-    border = np.zeros(len(gt.vertices), dtype=bool)
+    border = np.zeros(n, dtype=bool)
     border[edges[labels[edges[:, 0]] != labels[edges[:, 1]]].ravel()] = True
     if not border.any():
-        return np.full(len(gt.vertices), np.inf)
-    n = len(gt.vertices)
+        return np.full(n, np.inf)
     graph = sp.csr_array((np.asarray(gt.edges_unique_length), (edges[:, 0], edges[:, 1])),
                          shape=(n, n))  # fmt: skip
     return np.asarray(dijkstra(graph, directed=False, indices=np.nonzero(border)[0],
