@@ -24,7 +24,7 @@ import json
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -47,6 +47,9 @@ from bench.external_optics import PRESETS
 from bench.external_scene import DATA, SceneSpec
 from bench.external_session import Size, build_session
 from calibration.defaults import colorchecker_reflectances
+
+if TYPE_CHECKING:
+    import trimesh
 
 SCENES = {
     "spot-stepped": SceneSpec(
@@ -109,8 +112,8 @@ BUDGETS: dict[str, dict[str, Any]] = {
 # the colour where the shape is right: vertices this close to the true surface (metres)
 ON_SURFACE_M = 0.5e-3
 # the colour inside the patches: vertices whose closest true point is at least this far from a
-# border between two patches, along the true surface (metres); nearer, a pixel (0.3–0.6 mm on
-# the object at --size full) mixes the two paints
+# border between two patches, along the true surface (metres); nearer, a pixel of the
+# benchmark's views covers both paints
 PAINT_EDGE_M = 1.0e-3
 
 
@@ -155,7 +158,7 @@ def per_patch_rmse(npz: Path, out: Path, truth: Path) -> dict[int, float]:
     return {int(k): float(rmse[observed & (p == k)].mean()) for k in np.unique(p[observed])}
 
 
-def paint_edge_distance(gt: Any, labels: np.ndarray) -> np.ndarray:
+def paint_edge_distance(gt: trimesh.Trimesh, labels: np.ndarray) -> np.ndarray:
     """Distance along the edges of the true mesh ``gt`` from each of its vertices to the
     nearest vertex on a border between two patches of ``labels`` (inf with a single patch)."""
     n = len(gt.vertices)
@@ -170,15 +173,13 @@ def paint_edge_distance(gt: Any, labels: np.ndarray) -> np.ndarray:
                                min_only=True))  # fmt: skip
 
 
-def colour_where(
-    npz: Path, truth: Path, max_surface_m: float = np.inf, min_paint_edge_m: float = 0.0
-) -> dict[str, Any]:
-    """Spectral RMSE and ΔE00 (D65, A) of the observed vertices within ``max_surface_m`` of the
-    true surface whose closest true point is at least ``min_paint_edge_m`` from a paint edge,
-    and their share of the observed ones. Within :data:`ON_SURFACE_M`: the colour where the
-    shape is right, apart from what misplaced geometry costs it (a vertex 2 mm off takes the
-    truth of a surface it is not on); beyond :data:`PAINT_EDGE_M` from an edge: the colour
-    apart from what the images' resolution costs it where two paints meet."""
+def colour_subsets(npz: Path, truth: Path) -> dict[str, dict[str, Any]]:
+    """Spectral RMSE and ΔE00 (D65, A) of two subsets of the observed vertices, each with its
+    share of the observed ones: ``on_surface``, those within :data:`ON_SURFACE_M` of the true
+    surface (the colour where the shape is right, apart from what misplaced geometry costs it:
+    a vertex 2 mm off takes the truth of a surface it is not on), and ``inside_patches``, those
+    whose closest true point is :data:`PAINT_EDGE_M` or more from a paint edge (the colour
+    apart from what the images' resolution costs it where two paints meet)."""
     from calibration.colour_difference import DEFAULT_ILLUMINANTS, illuminant
     from reconstruct.outputs import export
     from reconstruct.outputs.evaluate import colour_reports, load_mesh, truth_at, truth_patches
@@ -189,23 +190,23 @@ def colour_where(
     gt = load_mesh(truth / "mesh.ply")
     labels = truth_patches(truth / "reflectance.npy", len(gt.vertices))
     d, reference, corner = truth_at(vertices, gt, np.load(truth / "reflectance.npy"))
-    keep = observed & (d <= max_surface_m)
-    if labels is not None and min_paint_edge_m > 0:
-        keep &= paint_edge_distance(gt, labels)[corner] >= min_paint_edge_m
+    inside = observed.copy()
+    if labels is not None:
+        inside &= paint_edge_distance(gt, labels)[corner] >= PAINT_EDGE_M
     estimate = np.asarray(data["reflectance"], dtype=float)
     rmse = np.sqrt(np.mean((estimate - reference) ** 2, axis=1))
-    colour = colour_reports(
-        estimate,
-        reference,
-        keep,
-        None if labels is None else labels[corner],
-        [illuminant(name) for name in DEFAULT_ILLUMINANTS],
-    )
-    return {
-        "share": float(keep.sum() / max(int(observed.sum()), 1)),
-        "rmse_mean": float(rmse[keep].mean()) if keep.any() else float("nan"),
-        "colour": [c.as_dict() for c in colour],
-    }
+    lights = [illuminant(name) for name in DEFAULT_ILLUMINANTS]
+    patch = None if labels is None else labels[corner]
+
+    def scored(keep: np.ndarray) -> dict[str, Any]:
+        colour = colour_reports(estimate, reference, keep, patch, lights)
+        return {
+            "share": float(keep.sum() / max(int(observed.sum()), 1)),
+            "rmse_mean": float(rmse[keep].mean()) if keep.any() else float("nan"),
+            "colour": [c.as_dict() for c in colour],
+        }
+
+    return {"on_surface": scored(observed & (d <= ON_SURFACE_M)), "inside_patches": scored(inside)}
 
 
 def reflectance_brightness(npz: Path, session: Path) -> dict[str, float]:
@@ -252,6 +253,7 @@ def run_scene(
     final = _score(session, rec.reflectance_path, final_dir, positions, offset=True)
     (folder / "oracle").mkdir(parents=True, exist_ok=True)
     oracle = do_oracle(session, None, folder / "oracle", config)
+    oracle_npz = folder / "oracle" / "reflectance.npz"
     from reconstruct.outputs import export
 
     final_mesh = final_dir / "final_mesh.ply"
@@ -274,18 +276,15 @@ def run_scene(
         "rmse_median": final["rmse_median"],
         "rmse_per_patch": per_patch_rmse(rec.reflectance_path, final_dir, truth),
         "outside_unit_range": final["outside_unit_range"],
-        "on_surface": colour_where(rec.reflectance_path, truth, max_surface_m=ON_SURFACE_M),
-        "inside_patches": colour_where(rec.reflectance_path, truth, min_paint_edge_m=PAINT_EDGE_M),
+        **colour_subsets(rec.reflectance_path, truth),
         "oracle_rmse_mean": oracle["rmse_mean"],
         "oracle_rmse_median": oracle["rmse_median"],
         "colour": final["colour"],
         "oracle_colour": oracle["colour"],
-        "oracle_inside_patches": colour_where(
-            folder / "oracle" / "reflectance.npz", truth, min_paint_edge_m=PAINT_EDGE_M
-        ),
+        "oracle_inside_patches": colour_subsets(oracle_npz, truth)["inside_patches"],
         "floor": information_floor(session),
         "brightness": reflectance_brightness(rec.reflectance_path, session),
-        "oracle_brightness": reflectance_brightness(folder / "oracle" / "reflectance.npz", session),
+        "oracle_brightness": reflectance_brightness(oracle_npz, session),
         "light_offset_error_m": final["light_offset_error_m"],
         "peak_rss_mb": peak_rss_mb(),
         "error_maps": [str(p) for p in sorted(folder.rglob("*error_map.png"))],

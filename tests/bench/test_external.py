@@ -236,7 +236,7 @@ def test_a_third_lamp_is_a_third_illumination_that_lowers_the_floor(
 def test_on_surface_colour_scores_only_vertices_on_the_true_surface(tmp_path: Path) -> None:
     import trimesh
 
-    from bench.external import ON_SURFACE_M, colour_where
+    from bench.external import ON_SURFACE_M, colour_subsets
     from calibration.defaults import colorchecker_reflectances
 
     vertices, faces, patch = plate()
@@ -251,7 +251,7 @@ def test_on_surface_colour_scores_only_vertices_on_the_true_surface(tmp_path: Pa
     moved = vertices + np.where(lifted, 4 * ON_SURFACE_M, 0.0)[:, None] * np.array([0, 0, 1.0])
     estimate = np.where(lifted[:, None], 0.5, reflectance)
     npz = _write_npz(tmp_path / "r.npz", moved, faces, estimate, np.ones(len(vertices), bool))
-    near = colour_where(npz, truth, max_surface_m=ON_SURFACE_M)
+    near = colour_subsets(npz, truth)["on_surface"]
     assert near["share"] == pytest.approx(1 - lifted.mean())
     assert near["rmse_mean"] == pytest.approx(0.0, abs=1e-6)
     for report in near["colour"]:
@@ -286,7 +286,7 @@ def test_on_surface_colour_scores_only_vertices_on_the_true_surface(tmp_path: Pa
 def test_colour_inside_patches_leaves_out_the_vertices_at_a_paint_edge(tmp_path: Path) -> None:
     import trimesh
 
-    from bench.external import PAINT_EDGE_M, colour_where, paint_edge_distance
+    from bench.external import PAINT_EDGE_M, colour_subsets, paint_edge_distance
     from calibration.defaults import colorchecker_reflectances
 
     vertices, faces, patch = plate()
@@ -306,8 +306,8 @@ def test_colour_inside_patches_leaves_out_the_vertices_at_a_paint_edge(tmp_path:
     at_edge = edge < PAINT_EDGE_M
     blurred = np.where(at_edge[:, None], reflectance.mean(axis=0), reflectance)
     npz = _write_npz(tmp_path / "r.npz", vertices, faces, blurred, np.ones(len(vertices), bool))
-    inside = colour_where(npz, truth, min_paint_edge_m=PAINT_EDGE_M)
-    everywhere = colour_where(npz, truth)
+    subsets = colour_subsets(npz, truth)
+    inside, everywhere = subsets["inside_patches"], subsets["on_surface"]  # all on the surface
     assert inside["share"] == pytest.approx(1 - at_edge.mean())
     assert everywhere["share"] == 1.0
     assert inside["colour"][0]["per_vertex"]["mean"] == pytest.approx(0.0, abs=1e-3)
