@@ -152,8 +152,12 @@ def colour_cells(colour: Sequence[dict[str, Any]]) -> list[str]:
             continue
         v = c["per_vertex"]
         cells.append(f"{v['mean']:.2f} / {v['median']:.2f} / {v['p90']:.2f}")
-        patch = c["patch_mean"] is not None
-        cells.append(f"{c['patch_mean']:.2f} / {c['patch_max']:.2f}" if patch else "-")
+        if c["patch_mean"] is None:
+            cells.append("-")
+            continue
+        cell = f"{c['patch_mean']:.2f} / {c['patch_max']:.2f}"
+        measured, listed = c["patches_measured"], len(c["patches"])
+        cells.append(cell if measured == listed else f"{cell} ({measured} of {listed})")
     return cells
 
 

@@ -182,7 +182,13 @@ def colour_subsets(npz: Path, truth: Path) -> dict[str, dict[str, Any]]:
     apart from what the images' resolution costs it where two paints meet)."""
     from calibration.colour_difference import DEFAULT_ILLUMINANTS, illuminant
     from reconstruct.outputs import export
-    from reconstruct.outputs.evaluate import colour_reports, load_mesh, truth_at, truth_patches
+    from reconstruct.outputs.evaluate import (
+        colour_reports,
+        load_mesh,
+        truth_at,
+        truth_patches,
+        unmeasured_patches,
+    )
 
     data = export.read_reflectance_npz(npz)
     vertices = np.asarray(data["vertices"], dtype=float)
@@ -197,9 +203,12 @@ def colour_subsets(npz: Path, truth: Path) -> dict[str, dict[str, Any]]:
     rmse = np.sqrt(np.mean((estimate - reference) ** 2, axis=1))
     lights = [illuminant(name) for name in DEFAULT_ILLUMINANTS]
     patch = None if labels is None else labels[corner]
+    faces = np.asarray(data["faces"], dtype=np.int64)
+    # the patches the full evaluation measures, so that every row averages the same patches
+    unmeasured = [] if patch is None else unmeasured_patches(vertices, faces, patch, observed)
 
     def scored(keep: np.ndarray) -> dict[str, Any]:
-        colour = colour_reports(estimate, reference, keep, patch, lights)
+        colour = colour_reports(estimate, reference, keep, patch, lights, unmeasured)
         return {
             "share": float(keep.sum() / max(int(observed.sum()), 1)),
             "rmse_mean": float(rmse[keep].mean()) if keep.any() else float("nan"),

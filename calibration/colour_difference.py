@@ -16,6 +16,7 @@ sRGB previews and the viewer), then CIELAB with the illuminant's perfect diffuse
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -128,13 +129,16 @@ def summarise(values: np.ndarray, mask: np.ndarray | None = None) -> Summary:
 @dataclass(frozen=True)
 class PatchRow:
     """One patch: its label, how many vertices it holds and the ΔE00 and spectral RMSE of the
-    median estimated spectrum against the median true spectrum."""
+    median estimated spectrum against the median true spectrum. ``measured`` is False where too
+    little of the patch was seen for its median to be a measurement (listed, but left out of
+    the mean and max)."""
 
     patch: int
     name: str
     vertices: int
     delta_e00: float
     rmse: float
+    measured: bool = True
 
 
 def per_patch(
@@ -144,8 +148,10 @@ def per_patch(
     light: Illuminant,
     mask: np.ndarray | None = None,
     names: list[str] | None = None,
+    unmeasured: Collection[int] = (),
 ) -> list[PatchRow]:
-    """Per patch label ≥ 0 (where ``mask`` holds): ΔE00 of the patch's median spectrum.
+    """Per patch label ≥ 0 (where ``mask`` holds): ΔE00 of the patch's median spectrum; the
+    labels in ``unmeasured`` are flagged as not measured.
 
     The median over the patch's vertices, wavelength by wavelength, is what a spectrometer
     aimed at the patch would report, robust to the few vertices on its border.
@@ -163,34 +169,42 @@ def per_patch(
         name = names[label] if names is not None and label < len(names) else str(label)
         rows.append(PatchRow(int(label), name, int(sel.sum()),
                              float(delta_e00(e, t, light)),
-                             float(np.sqrt(np.mean((e - t) ** 2)))))  # fmt: skip
+                             float(np.sqrt(np.mean((e - t) ** 2))),
+                             bool(label not in unmeasured)))  # fmt: skip
     return rows
 
 
 @dataclass(frozen=True)
 class ColourReport:
     """ΔE00 under one illuminant: per vertex (mean/median/p90) and, where patches exist, per
-    patch (mean and max of the patches' ΔE00 and the table)."""
+    patch (mean and max of the measured patches' ΔE00, and the table of all)."""
 
     illuminant: str
     per_vertex: Summary
     patches: list[PatchRow]
 
     @property
+    def measured(self) -> list[float]:
+        """ΔE00 of the measured patches."""
+        return [p.delta_e00 for p in self.patches if p.measured]
+
+    @property
     def patch_mean(self) -> float:
-        return float(np.mean([p.delta_e00 for p in self.patches])) if self.patches else np.nan
+        return float(np.mean(self.measured)) if self.measured else np.nan
 
     @property
     def patch_max(self) -> float:
-        return float(np.max([p.delta_e00 for p in self.patches])) if self.patches else np.nan
+        return float(np.max(self.measured)) if self.measured else np.nan
 
     def as_dict(self) -> dict[str, object]:
-        """JSON-ready: per-vertex summary, patch mean/max and the per-patch table."""
+        """JSON-ready: per-vertex summary, patch mean/max (of the measured patches, counted in
+        ``patches_measured``) and the per-patch table."""
         return {
             "illuminant": self.illuminant,
             "per_vertex": asdict(self.per_vertex),
-            "patch_mean": self.patch_mean if self.patches else None,
-            "patch_max": self.patch_max if self.patches else None,
+            "patch_mean": self.patch_mean if self.measured else None,
+            "patch_max": self.patch_max if self.measured else None,
+            "patches_measured": len(self.measured),
             "patches": [asdict(p) for p in self.patches],
         }
 
@@ -202,9 +216,15 @@ def colour_report(
     mask: np.ndarray | None = None,
     patch: np.ndarray | None = None,
     names: list[str] | None = None,
+    unmeasured: Collection[int] = (),
 ) -> ColourReport:
     """ΔE00 of ``estimate`` against ``truth`` (N, N_λ) under ``light`` over the vertices in
-    ``mask``; per patch too when ``patch`` labels (N,) are given (-1 = no patch)."""
+    ``mask``; per patch too when ``patch`` labels (N,) are given (-1 = no patch), the labels in
+    ``unmeasured`` listed but left out of the patch mean and max."""
     de = delta_e00(estimate, truth, light)
-    rows = [] if patch is None else per_patch(estimate, truth, patch, light, mask, names)
+    rows = (
+        []
+        if patch is None
+        else per_patch(estimate, truth, patch, light, mask, names, unmeasured)
+    )
     return ColourReport(light.name, summarise(de, mask), rows)

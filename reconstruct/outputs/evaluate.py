@@ -41,6 +41,10 @@ from reconstruct.stages import publish
 
 EVALUATION_FILE, RMSE_FILE, ERROR_MAP, ERROR_HIST = publish.EVALUATION
 PATCH_FILE = "patch.npy"  # beside the true reflectance: patch label per true vertex (-1 = none)
+# A patch counts in the per-patch mean when the reconstruction saw at least a spectrometer's
+# aperture of its interior (3 mm, the small-area view of common 45/0 instruments): a patch
+# seen only along its border with a neighbour has a median of mixed paint, not a reading.
+APERTURE_M = 3e-3
 
 
 @dataclass
@@ -87,21 +91,26 @@ def colour_rows(reports: Sequence[dict[str, Any]]) -> list[tuple[str, str]]:
         v = r["per_vertex"]
         rows.append((f"ΔE00 {r['illuminant']} per vertex mean / median / p90",
                      f"{v['mean']:.2f} / {v['median']:.2f} / {v['p90']:.2f}"))  # fmt: skip
-        if r["patches"]:
-            rows.append((f"ΔE00 {r['illuminant']} per patch ({len(r['patches'])}) mean / max",
+        if r["patch_mean"] is not None:
+            counted = f"{r['patches_measured']} of {len(r['patches'])} measured"
+            rows.append((f"ΔE00 {r['illuminant']} per patch ({counted}) mean / max",
                          f"{r['patch_mean']:.2f} / {r['patch_max']:.2f}"))  # fmt: skip
     return rows
 
 
 def patch_table(reports: Sequence[dict[str, Any]]) -> tuple[list[str], list[list[str]]]:
-    """Columns and rows of the per-patch table: one ΔE00 column per illuminant, then RMSE."""
+    """Columns and rows of the per-patch table: one ΔE00 column per illuminant, the RMSE, and
+    whether the patch is measured (counted in the mean and max)."""
     if not reports or not reports[0]["patches"]:
         return [], []
-    columns = ["patch", "vertices", *(f"ΔE00 {r['illuminant']}" for r in reports), "RMSE"]
+    columns = [
+        "patch", "vertices", *(f"ΔE00 {r['illuminant']}" for r in reports), "RMSE", "measured"
+    ]  # fmt: skip
     rows = []
     for k, p in enumerate(reports[0]["patches"]):
         des = [f"{r['patches'][k]['delta_e00']:.2f}" for r in reports]
-        rows.append([p["name"], str(p["vertices"]), *des, f"{p['rmse']:.4f}"])
+        measured = "yes" if p["measured"] else "no: too little seen"
+        rows.append([p["name"], str(p["vertices"]), *des, f"{p['rmse']:.4f}", measured])
     return columns, rows
 
 
@@ -126,11 +135,37 @@ def colour_reports(
     observed: np.ndarray,
     patch: np.ndarray | None,
     lights: Sequence[Illuminant],
+    unmeasured: Sequence[int] = (),
 ) -> list[ColourReport]:
-    """ΔE00 per illuminant over the observed vertices (ColorChecker names for 24 patches)."""
+    """ΔE00 per illuminant over the observed vertices (ColorChecker names for 24 patches), the
+    patches in ``unmeasured`` left out of the patch mean and max."""
     names = colorchecker_reflectances()[0]
     use = names if patch is not None and patch.max() < len(names) else None
-    return [colour_report(estimate, truth, light, observed, patch, use) for light in lights]
+    return [
+        colour_report(estimate, truth, light, observed, patch, use, unmeasured)
+        for light in lights
+    ]
+
+
+def unmeasured_patches(
+    vertices: np.ndarray, faces: np.ndarray, patch: np.ndarray, observed: np.ndarray
+) -> list[int]:
+    """Patch labels whose interior the reconstruction saw less of than a spectrometer's
+    aperture (a disc of diameter :data:`APERTURE_M`). A patch's interior is its observed
+    vertices whose neighbours are all observed and in the same patch, each weighing a third of
+    the area of its faces."""
+    labels = np.asarray(patch, dtype=int)
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    border = ~np.asarray(observed, dtype=bool)
+    crossing = (labels[edges[:, 0]] != labels[edges[:, 1]]) | border[edges].any(axis=1)
+    border[edges[crossing].ravel()] = True
+    area = np.zeros(len(vertices))
+    face_area = trimesh.Trimesh(vertices, faces, process=False).area_faces
+    np.add.at(area, faces.ravel(), np.repeat(face_area / 3.0, 3))
+    inside = ~border & (labels >= 0)
+    seen = np.bincount(labels[inside], weights=area[inside], minlength=labels.max() + 1)
+    aperture = np.pi * (APERTURE_M / 2) ** 2
+    return [int(k) for k in np.unique(labels[labels >= 0]) if seen[k] < aperture]
 
 
 def information_floor(
@@ -318,7 +353,8 @@ def _evaluate(
     d_comp, _, _ = surface_distance(np.asarray(gt.vertices, dtype=float), recon_mesh)
     rmse = np.sqrt(np.mean((refl - truth) ** 2, axis=1))
     lights = illuminants or [illuminant(n) for n in DEFAULT_ILLUMINANTS]
-    colour = colour_reports(refl, truth, observed, patch, lights)
+    unmeasured = [] if patch is None else unmeasured_patches(X, faces, patch, observed)
+    colour = colour_reports(refl, truth, observed, patch, lights, unmeasured)
     ev = Evaluation(
         accuracy_m=float(np.mean(d_acc)),
         completeness_m=float(np.mean(d_comp)),

@@ -312,3 +312,29 @@ def test_colour_inside_patches_leaves_out_the_vertices_at_a_paint_edge(tmp_path:
     assert everywhere["share"] == 1.0
     assert inside["colour"][0]["per_vertex"]["mean"] == pytest.approx(0.0, abs=1e-3)
     assert everywhere["colour"][0]["per_vertex"]["mean"] > 0.1
+
+
+def test_a_patch_seen_only_along_its_border_is_listed_but_not_averaged(tmp_path: Path) -> None:
+    import trimesh
+
+    from bench._common import colour_cells
+    from bench.external import colour_subsets
+    from calibration.defaults import colorchecker_reflectances
+
+    vertices, faces, patch = plate()
+    truth = tmp_path / "truth"
+    truth.mkdir()
+    trimesh.Trimesh(vertices, faces, process=False).export(truth / "mesh.ply")
+    reflectance = colorchecker_reflectances()[1][[2, 7]][patch]  # blue sky | orange
+    np.save(truth / "reflectance.npy", reflectance)
+    np.save(truth / "patch.npy", patch)
+    # patch 1 seen only on its border column, and there read as a mix of both paints
+    observed = vertices[:, 0] <= 1e-9
+    estimate = np.where((patch == 1)[:, None], reflectance.mean(axis=0), reflectance)
+    npz = _write_npz(tmp_path / "r.npz", vertices, faces, estimate, observed)
+    seen = colour_subsets(npz, truth)["on_surface"]  # all of the observed vertices
+    d65 = seen["colour"][0]
+    assert [(p["patch"], p["measured"]) for p in d65["patches"]] == [(0, True), (1, False)]
+    assert d65["patches"][1]["delta_e00"] > 1.0
+    assert d65["patch_mean"] == pytest.approx(0.0, abs=1e-6)
+    assert colour_cells(seen["colour"])[1] == "0.00 / 0.00 (1 of 2)"

@@ -116,6 +116,24 @@ def test_per_patch_takes_the_median_spectrum_of_each_patch() -> None:
     assert colour_report(estimate, truth, light).as_dict()["patch_mean"] is None
 
 
+def test_an_unmeasured_patch_is_listed_but_left_out_of_the_mean_and_max() -> None:
+    names, cc = colorchecker_reflectances()
+    light = illuminant("D65")
+    patch = np.array([3, 3, 5, 5, 9])
+    truth = cc[patch]
+    estimate = truth * np.array([1.1, 1.1, 1.0, 1.0, 2.0])[:, None]
+    report = colour_report(estimate, truth, light, None, patch, names, unmeasured=[9])
+    assert [(r.patch, r.measured) for r in report.patches] == [(3, True), (5, True), (9, False)]
+    expected = float(delta_e00(cc[3] * 1.1, cc[3], light))
+    assert report.patch_mean == pytest.approx(expected / 2)
+    assert report.patch_max == pytest.approx(expected)
+    assert report.patches[2].delta_e00 > 2 * expected  # the unmeasured patch's error
+    d = report.as_dict()
+    assert d["patches_measured"] == 2 and d["patches"][2]["measured"] is False
+    none = colour_report(estimate, truth, light, None, patch, names, unmeasured=[3, 5, 9])
+    assert none.as_dict()["patch_mean"] is None and len(none.patches) == 3
+
+
 def test_information_floor_shrinks_with_more_illuminations() -> None:
     _, cc = colorchecker_reflectances()
     basis = default_basis()

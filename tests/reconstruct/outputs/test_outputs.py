@@ -18,7 +18,12 @@ from reconstruct.optimise.settings import OptimiseSettings
 from reconstruct.optimise.steps import OptimiseResult
 from reconstruct.optimise.synthetic import SyntheticScene
 from reconstruct.outputs import export
-from reconstruct.outputs.evaluate import evaluate, interpolate_at, surface_distance
+from reconstruct.outputs.evaluate import (
+    evaluate,
+    interpolate_at,
+    surface_distance,
+    unmeasured_patches,
+)
 from reconstruct.outputs.gltf import Z_UP_TO_Y_UP
 from reconstruct.outputs.relight import Camera, encode_srgb, illuminant_spd, relight
 from reconstruct.outputs.result import load_result
@@ -291,8 +296,7 @@ def test_evaluate_reports_ciede2000_per_vertex_and_per_patch(
     assert [c["illuminant"] for c in ev.colour] == ["D65", "A"]
     assert all(c["per_vertex"]["p90"] < 1e-6 and not c["patches"] for c in ev.colour)
     # a brighter truth on two patches, labelled in patch.npy beside the reflectance
-    n = len(scene.vertices)
-    patch = np.where(np.arange(n) < n // 2, 0, 1)
+    patch = np.where(scene.vertices[:, 2] < np.median(scene.vertices[:, 2]), 0, 1)  # two caps
     patch[:3] = -1
     np.save(tmp_path / "patch.npy", patch)
     np.save(truth, scene.reflectance * 1.1)
@@ -305,14 +309,32 @@ def test_evaluate_reports_ciede2000_per_vertex_and_per_patch(
     assert code == 0
     printed = capsys.readouterr().out
     assert "ΔE00 D65 per vertex" in printed and "ΔE00 FL2 per patch" in printed
-    assert "ΔE00 lamp" in printed and "per patch" in printed
+    assert "ΔE00 lamp" in printed and "per patch (2 of 2 measured)" in printed
     saved = json.loads((recon_dir / "evaluation.json").read_text())
     colour = {c["illuminant"]: c for c in saved["colour"]}
     assert list(colour) == ["D65", "A", "FL2", "lamp"]
     for c in colour.values():
         assert 0.5 < c["per_vertex"]["mean"] < 10
         assert [p["name"] for p in c["patches"]] == ["dark skin", "light skin"]
-        assert c["patch_max"] >= c["patch_mean"] > 0.5
+        assert c["patch_max"] >= c["patch_mean"] > 0.5 and c["patches_measured"] == 2
+
+
+def test_a_patch_seen_along_its_border_only_is_not_measured() -> None:
+    # a 10 mm square of 0.5 mm edges: patch 0, with a strip two vertices wide of patch 1
+    # whose interior (the outer column) is 21 vertices, less than a 3 mm aperture's 7.1 mm²
+    xs, ys = np.meshgrid(np.arange(21) * 5e-4, np.arange(21) * 5e-4)
+    vertices = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], axis=1)
+    k = np.arange(20 * 20)
+    i, j = k // 20, k % 20
+    a, b, c, d = i * 21 + j, i * 21 + j + 1, (i + 1) * 21 + j, (i + 1) * 21 + j + 1
+    faces = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+    patch = np.where(xs.ravel() < 7e-4, 1, 0)
+    observed = np.ones(len(vertices), bool)
+    assert unmeasured_patches(vertices, faces, patch, observed) == [1]
+    wider = np.where(xs.ravel() < 1.2e-3, 1, 0)  # three columns: two inside, 10 mm² and more
+    assert unmeasured_patches(vertices, faces, wider, observed) == []
+    # unobserved vertices are no interior: patch 0 seen only on a 2-column strip
+    assert unmeasured_patches(vertices, faces, wider, xs.ravel() < 2.7e-3) == [0]
 
 
 def test_evaluate_a_sim_truth_names_its_colorchecker_patches(
@@ -339,7 +361,7 @@ def test_evaluate_a_sim_truth_names_its_colorchecker_patches(
             "--gt-reflectance", str(gt / "reflectance.npy")]  # fmt: skip
     assert main(args) == 0
     printed = capsys.readouterr().out
-    assert "dark skin" in printed and "ΔE00 A per patch (24)" in printed
+    assert "dark skin" in printed and "ΔE00 A per patch (24 of 24 measured)" in printed
     colour = json.loads((recon / "evaluation.json").read_text())["colour"]
     d65 = {p["name"]: p["delta_e00"] for p in colour[0]["patches"]}
     assert d65["dark skin"] > 1.0 and colour[0]["patch_max"] == d65["dark skin"]
