@@ -88,6 +88,16 @@ SCENES = {
         (20.0, 45.0),
         seed=3,
     ),
+    # added after the colour stage's tap weights were set on spot: its held-out scene
+    "cow-stepped": SceneSpec(
+        "cow-stepped",
+        "cow.obj",
+        {"L1": "Ikea.LED.6.3W.2700K", "L2": "Airam.LED.14W.4000K"},
+        "Nikon D5100",
+        (0.7, 1.0, 1.3),
+        (20.0, 45.0),
+        seed=4,
+    ),
 }
 SIZES = {
     "smoke": Size(width=160, height=120, focal_px=220.0, views=8, spp=16),

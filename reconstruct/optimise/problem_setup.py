@@ -68,10 +68,26 @@ def rim_hidden(
     return np.asarray(hidden.reshape(BULB_RIM_RAYS, -1).any(axis=0))
 
 
+def tap_weights(values: np.ndarray, gradient: np.ndarray, scale: float) -> np.ndarray:
+    """Factor per observation ``1 / (1 + (g / scale)²)``, g the image's relative gradient at
+    its tap (per pixel): ‖∂RGB/∂(u, v)‖ / ‖RGB‖ from its bilinear ``values`` (M, 3) and
+    ``gradient`` (M, 3, 2), so an edge between two paints of one brightness counts too."""
+    size = np.linalg.norm(values, axis=1)
+    g = np.linalg.norm(gradient.reshape(len(gradient), -1), axis=1) / np.maximum(size, 1e-6)
+    return np.asarray(1.0 / (1.0 + (g / scale) ** 2))
+
+
 def build_problem(
-    inp: OptimiseInput, X: np.ndarray, light: np.ndarray, cfg: OptimiseSettings
+    inp: OptimiseInput,
+    X: np.ndarray,
+    light: np.ndarray,
+    cfg: OptimiseSettings,
+    colour_stage: bool = False,
 ) -> Problem:
-    """The observation set and frozen weights at the current estimate (see module doc)."""
+    """The observation set and frozen weights at the current estimate (see module doc). For
+    the ``colour_stage`` each observation also weighs :func:`tap_weights` (scale
+    ``cfg.tap_gradient_scale``): a tap on a paint, shadow or silhouette edge reads a mix of
+    what its pixel covers, which the colour should not follow but the shape needs."""
     n = len(X)
     normals, _ = vertex_normals(X, inp.faces)
     P = light_positions(inp.rig, cfg.light_mode, light)
@@ -91,6 +107,8 @@ def build_problem(
     view = fr.view[frame]
     keep = np.ones(vertex.size, dtype=bool)
     observed = np.zeros((vertex.size, 3))
+    weigh_taps = colour_stage and cfg.tap_gradient_scale > 0 and inp.observed is None
+    taps = np.ones(vertex.size)
     if inp.observed is not None:
         observed = inp.observed[vertex, frame]
         keep &= np.all(np.isfinite(observed), axis=1)
@@ -102,7 +120,12 @@ def build_problem(
                 continue
             uv = inp.rig.intrinsics[c].project_camera(inp.rig.poses[c].to_camera(X[vertex[idx]]))
             keep[idx] &= taps_valid(fr.valid, frame[idx], uv, cfg.margin_px)
-            observed[idx] = sample_pairs(fr.images, frame[idx], np.arange(idx.size), uv, False)[0]
+            values, gradient = sample_pairs(
+                fr.images, frame[idx], np.arange(idx.size), uv, weigh_taps
+            )
+            observed[idx] = values
+            if weigh_taps:
+                taps[idx] = tap_weights(values, gradient, cfg.tap_gradient_scale)
     s = shading(X[vertex], normals[vertex], P[view])
     keep &= s > 0
     if inp.light_radius > 0:  # cos θ > r / d: the whole bulb above the horizon
@@ -162,10 +185,12 @@ def build_problem(
             int(np.sum(highlight < 0.5)),
             obs.count,
         )
+    factor = highlight
+    if weigh_taps:
+        on_taps = taps[np.flatnonzero(keep)[order]]
+        factor = on_taps if highlight is None else highlight * on_taps
     spectral = spectral_regulariser(cfg.spectral_prior, inp.basis)
-    weights = Weights(
-        cfg.gamma, e, w, edge_scale(X, adj), cfg.rendering_scale, highlight, spectral
-    )
+    weights = Weights(cfg.gamma, e, w, edge_scale(X, adj), cfg.rendering_scale, factor, spectral)
     return Problem(
         inp.faces, n, inp.basis.B, inp.rig, fr, obs, weights, problem_mode(cfg.light_mode)
     )

@@ -59,6 +59,11 @@ class OptimiseSettings:
     # the diffuse model's residual and its highlight taken off the observations
     # (reconstruct/optimise/gloss.py); ``none``: a Lambertian object.
     gloss: Literal["none", "fit"] = "none"
+    # The final colour stage: the reflectance alone at the final shape and light, each
+    # observation weighed by 1 / (1 + (g / tap_gradient_scale)²), g the image's relative
+    # gradient at its tap (per pixel): a tap on a paint, shadow or silhouette edge reads a mix
+    # of what its pixel covers (bench/README.md, "Edge taps"). 0: no such stage unless gloss.
+    tap_gradient_scale: float = bounded(0.3, min=0.0, max=1e6)
     outer_iterations: int = bounded(3, min=0, max=1000)
     light_iterations: int = bounded(15, min=0, max=10_000)
     # Each joint stage does most of its work in its first few steps; the shadow and

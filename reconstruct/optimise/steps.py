@@ -191,7 +191,9 @@ def optimise(
 
     blurs = coarse_blurs(cfg, inp.observed is None)
     last_outer = len(blurs) + cfg.outer_iterations if cfg.optimise_positions else 0
-    last_stage = last_outer + (cfg.gloss == "fit")  # with the gloss lobe: a colour stage last
+    # with the gloss lobe, or edge taps to weigh in images: a colour stage last
+    colour_stage = cfg.gloss == "fit" or (cfg.tap_gradient_scale > 0 and inp.observed is None)
+    last_stage = last_outer + colour_stage
     free_light = cfg.light_mode != "fixed"
     X0 = X.copy()
     scale0 = edge_scale(X0, adjacency(inp.faces, len(X0)))
@@ -237,7 +239,8 @@ def optimise(
         log.info("resuming the optimisation after stage %d (%s)", state.stage, checkpoint)
         history[:], A0 = state.history, state.initial_alpha
         seconds.update(state.seconds)
-        problem = build_problem(inp, state.vertices, state.light, cfg)
+        finished = state.done and colour_stage  # ended on the colour stage's weights
+        problem = build_problem(inp, state.vertices, state.light, cfg, colour_stage=finished)
         theta = problem.pack(state.vertices, project(state.alpha, B, 0.0, upper), state.light)
         # a finished solve goes straight to its uncertainty and the result
         first_outer = last_outer + 1 if state.done else state.stage + 1
@@ -323,12 +326,13 @@ def optimise(
             break
     if last_stage > last_outer and not (state is not None and state.done):
         # the reflectance once more from the observations as they are (highlights down-weighted
-        # when that is on): the fitted lobe places the light and the shape, but one roughness
-        # and one scale per object misplace colour where the real lobe differs. At full
-        # resolution and the final shape and light, as a resumed solve rebuilds them.
+        # when that is on), edge taps weighing less: the fitted lobe places the light and the
+        # shape, but one roughness and one scale per object misplace colour where the real lobe
+        # differs. At full resolution and the final shape and light, as a resumed solve
+        # rebuilds them.
         t0 = time.perf_counter()
         X, _, light = problem.unpack(theta)
-        problem = build_problem(inp, X, light, cfg)
+        problem = build_problem(inp, X, light, cfg, colour_stage=True)
         seconds["shadows"] = seconds.get("shadows", 0.0) + time.perf_counter() - t0
         theta = run(
             "colour", last_stage, problem, theta, problem.mask(False, True, False),

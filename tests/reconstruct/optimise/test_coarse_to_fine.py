@@ -78,7 +78,7 @@ def test_start_several_pixels_off_converges_only_coarse_to_fine() -> None:
         res = optimise(scene.input(start, images=True), cfg)
         after[blur] = np.mean(surface_distance(res.vertices, truth)[0])
         stages = [h["stage"] for h in res.history if h["iteration"] == 0]
-        assert stages == ["light"] + ["coarse"] * (2 if blur else 0) + ["joint"] * 2
+        assert stages == ["light"] + ["coarse"] * (2 if blur else 0) + ["joint"] * 2 + ["colour"]
     assert after[0.0] > 0.6 * before  # stuck
     assert after[4.0] < 0.5 * before
     assert after[4.0] < 0.7 * after[0.0]

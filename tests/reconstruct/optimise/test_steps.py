@@ -5,11 +5,12 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 import trimesh
 
 from calibration.bounds import ROUND_OFF
 from reconstruct.optimise.mesh import adjacency, edges
-from reconstruct.optimise.problem_setup import build_problem, initial_reflectance
+from reconstruct.optimise.problem_setup import build_problem, initial_reflectance, tap_weights
 from reconstruct.optimise.settings import OptimiseSettings
 from reconstruct.optimise.steps import optimise
 from reconstruct.optimise.synthetic import SyntheticScene, perturb
@@ -27,9 +28,9 @@ def test_joint_optimisation_refines_shape_and_finds_the_light(image_scene: Synth
     after = np.mean(surface_distance(res.vertices, truth)[0])
     assert after < 0.9 * before
     assert np.linalg.norm(res.light[0] - image_scene.light_offset) < 0.04  # from 6.3 cm
-    assert records[0].startswith("light") and records[-1].startswith("joint")
+    assert records[0].startswith("light") and records[-1].startswith("colour")
     stages = {h["stage"] for h in res.history}
-    assert stages == {"light", "joint"}
+    assert stages == {"light", "joint", "colour"}
     # the joint solve's spectra beat the paper's baseline, the per-vertex 2-D estimate on the
     # initial mesh (unbounded, as in the paper; the bounded one is the solve's own start)
     light0 = np.zeros((1, 3))
@@ -90,3 +91,32 @@ def test_edge_scale_is_mean_edge_length() -> None:
     scale = edge_scale(np.asarray(m.vertices), adjacency(m.faces, len(m.vertices)))
     assert np.isclose(scale.mean(), m.edges_unique_length.mean(), rtol=0.05)
     assert len(edges(adjacency(m.faces, len(m.vertices)))) == len(m.edges_unique)
+
+
+def test_tap_weights_halve_where_the_relative_gradient_reaches_the_scale() -> None:
+    values = np.array([[0.1, 0.1, 0.1], [0.2, 0.2, 0.2], [0.1, 0.1, 0.1]])
+    gradient = np.zeros((3, 3, 2))
+    gradient[1, :, 0] = 0.06  # grey brightening by 30 % per pixel
+    gradient[2, 0, 1], gradient[2, 1, 1] = 0.110227, -0.110227  # red to green, one brightness
+    assert tap_weights(values, gradient, 0.3) == pytest.approx([1.0, 0.5, 0.1], abs=1e-6)
+
+
+def test_colour_stage_weighs_taps_on_paint_edges_less(image_scene: SyntheticScene) -> None:
+    inp, light = image_scene.input(images=True), image_scene.light_offset[None]
+    X = image_scene.vertices
+    assert build_problem(inp, X, light, OptimiseSettings()).weights.observation is None
+    off = OptimiseSettings(tap_gradient_scale=0.0)
+    assert build_problem(inp, X, light, off, colour_stage=True).weights.observation is None
+    problem = build_problem(inp, X, light, OptimiseSettings(), colour_stage=True)
+    factor = problem.weights.observation
+    assert factor is not None and factor.shape == (problem.obs.count,)
+    assert np.all((factor > 0) & (factor <= 1))
+    # vertices with a neighbour of another paint against those inside a patch
+    e = edges(adjacency(image_scene.faces, len(X)))
+    differs = np.any(image_scene.reflectance[e[:, 0]] != image_scene.reflectance[e[:, 1]], axis=1)
+    at_edge = np.zeros(len(X), bool)
+    at_edge[e[differs].ravel()] = True
+    on_edge = at_edge[problem.obs.vertex]
+    assert on_edge.any() and (~on_edge).any()
+    # a quarter of the edge vertices' taps weigh under 0.8, of the others' under 0.9
+    assert np.percentile(factor[on_edge], 25) < 0.8 < 0.9 < np.percentile(factor[~on_edge], 25)

@@ -284,6 +284,16 @@ def test_config_errors_name_the_file_and_section(tmp_path: Path) -> None:
         _scaled(Intrinsics.pinhole(640, 480, 800.0), 320, 200)
 
 
+def test_the_documented_reconstruct_config_loads(tmp_path: Path) -> None:
+    from reconstruct.run.pipeline import load_config
+
+    doc = (Path(__file__).parents[3] / "docs" / "usage-reconstruct.md").read_text()
+    example = doc.split("`--config` takes a YAML file")[1].split("```yaml\n")[1].split("```")[0]
+    path = tmp_path / "documented.yaml"
+    path.write_text(example)
+    assert set(load_config(path)) == {"subdivide", "optimise"}
+
+
 def test_evaluate_reports_ciede2000_per_vertex_and_per_patch(
     recon_dir: Path, scene: SyntheticScene, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
