@@ -28,7 +28,7 @@ from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
 from reconstruct.optimise.problem import LightMode, Observations, Problem, Rig, Weights
 from reconstruct.optimise.sampling import sample_pairs, taps_valid
 from reconstruct.optimise.settings import OptimiseInput, OptimiseSettings, SettingsLightMode
-from reconstruct.optimise.weights import edge_scale, photometric_weights
+from reconstruct.optimise.weights import edge_scale, photometric_weights, tap_weights
 
 log = logging.getLogger(__name__)
 
@@ -66,15 +66,6 @@ def rim_hidden(
         np.tile(normals, (BULB_RIM_RAYS, 1)),
     )
     return np.asarray(hidden.reshape(BULB_RIM_RAYS, -1).any(axis=0))
-
-
-def tap_weights(values: np.ndarray, gradient: np.ndarray, scale: float) -> np.ndarray:
-    """Factor per observation ``1 / (1 + (g / scale)²)``, g the image's relative gradient at
-    its tap (per pixel): ‖∂RGB/∂(u, v)‖ / ‖RGB‖ from its bilinear ``values`` (M, 3) and
-    ``gradient`` (M, 3, 2), so an edge between two paints of one brightness counts too."""
-    size = np.linalg.norm(values, axis=1)
-    g = np.linalg.norm(gradient.reshape(len(gradient), -1), axis=1) / np.maximum(size, 1e-6)
-    return np.asarray(1.0 / (1.0 + (g / scale) ** 2))
 
 
 def build_problem(

@@ -14,6 +14,10 @@ their reflectance from their neighbours: weight 1 between two unobserved vertice
 without pulling observed boundary vertices towards it.
 Geometric scale l_i (eq. 16): the mean length of the edges at vertex i, so the geometric term is
 scale free as in MVIR.
+
+Tap weights (the final colour stage): an observation whose bilinear tap sits where the image
+changes fast (a paint, shadow or silhouette edge) reads a mix of two surfaces, so it weighs less
+in the reflectance.
 """
 
 from __future__ import annotations
@@ -58,6 +62,15 @@ def photometric_weights(
     any_i, any_j = seen[i].any(axis=1), seen[j].any(axis=1)
     fill = np.where(any_i | any_j, fill_weight, 1.0)
     return np.where(n_both > 0, w.sum(axis=1) / np.maximum(n_both, 1), fill)
+
+
+def tap_weights(values: np.ndarray, gradient: np.ndarray, scale: float) -> np.ndarray:
+    """Factor per observation ``1 / (1 + (g / scale)²)``, g the image's relative gradient at
+    its tap (per pixel): ‖∂RGB/∂(u, v)‖ / ‖RGB‖ from its bilinear ``values`` (M, 3) and
+    ``gradient`` (M, 3, 2), so an edge between two paints of one brightness counts too."""
+    size = np.linalg.norm(values, axis=1)
+    g = np.linalg.norm(gradient.reshape(len(gradient), -1), axis=1) / np.maximum(size, 1e-6)
+    return np.asarray(1.0 / (1.0 + (g / scale) ** 2))
 
 
 def edge_scale(vertices: np.ndarray, adjacency: sp.csr_array) -> np.ndarray:

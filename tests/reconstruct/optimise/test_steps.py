@@ -10,11 +10,11 @@ import trimesh
 
 from calibration.bounds import ROUND_OFF
 from reconstruct.optimise.mesh import adjacency, edges
-from reconstruct.optimise.problem_setup import build_problem, initial_reflectance, tap_weights
+from reconstruct.optimise.problem_setup import build_problem, initial_reflectance
 from reconstruct.optimise.settings import OptimiseSettings
 from reconstruct.optimise.steps import optimise
 from reconstruct.optimise.synthetic import SyntheticScene, perturb
-from reconstruct.optimise.weights import edge_scale, photometric_weights
+from reconstruct.optimise.weights import edge_scale, photometric_weights, tap_weights
 from reconstruct.outputs.evaluate import surface_distance
 
 
