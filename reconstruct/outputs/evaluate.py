@@ -91,10 +91,11 @@ def colour_rows(reports: Sequence[dict[str, Any]]) -> list[tuple[str, str]]:
         v = r["per_vertex"]
         rows.append((f"ΔE00 {r['illuminant']} per vertex mean / median / p90",
                      f"{v['mean']:.2f} / {v['median']:.2f} / {v['p90']:.2f}"))  # fmt: skip
-        if r["patch_mean"] is not None:
+        if r["patches"]:
             counted = f"{r['patches_measured']} of {len(r['patches'])} measured"
-            rows.append((f"ΔE00 {r['illuminant']} per patch ({counted}) mean / max",
-                         f"{r['patch_mean']:.2f} / {r['patch_max']:.2f}"))  # fmt: skip
+            mean, top = r["patch_mean"], r["patch_max"]
+            value = "-" if mean is None else f"{mean:.2f} / {top:.2f}"
+            rows.append((f"ΔE00 {r['illuminant']} per patch ({counted}) mean / max", value))
     return rows
 
 
