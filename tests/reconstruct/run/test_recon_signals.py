@@ -23,13 +23,14 @@ DONE = "reflectance scale"  # a row of the summary printed after the run
 
 def stop_reconstructions(
     session: Path, config: Path, seed: int, stops: int, length_s: float
-) -> int:
+) -> tuple[int, list[tuple[float, int, str]]]:
     """Stop `rig reconstruct` runs until ``stops`` were stopped, each resuming the last; after
     a run that finished before its signal the outputs are removed so the next one works
-    again. Returns the runs."""
+    again. Returns the runs, and the delay, exit code and last line of each that finished."""
     rng = np.random.default_rng(seed)
     recon = session / "recon"
     runs = stopped = 0
+    finished: list[tuple[float, int, str]] = []
     while stopped < stops:
         signum, delay = pick(rng, runs, length_s)
         outcome = signal_at(reconstruct_args(session, config), signum, delay, DONE)
@@ -40,19 +41,21 @@ def stop_reconstructions(
         # the status says complete (then 130/143 is right and the outputs are whole)
         if outcome.finished_first or (status is not None and status["status"] == "complete"):
             assert status is not None and status["status"] == "complete"
+            finished.append((outcome.delay_s, outcome.returncode, outcome.stderr.strip()[-200:]))
             shutil.rmtree(recon)
             continue
         stopped += 1
         assert status is None or status["status"] == "interrupted", (outcome, status)
         assert main(["session", "verify", str(session)]) == 0
-    return runs
+    return runs, finished
 
 
 def test_signals_during_start_up_exit_130_or_143_and_leave_the_session_intact(
     tmp_path: Path,
 ) -> None:
     session, config = make_session(tmp_path)
-    assert stop_reconstructions(session, config, seed=3, stops=4, length_s=STARTUP_S) == 4
+    runs, finished = stop_reconstructions(session, config, seed=3, stops=4, length_s=STARTUP_S)
+    assert runs == 4, finished  # no run gets to finish within its start-up
 
 
 @pytest.mark.slow
@@ -61,7 +64,7 @@ def test_twenty_signals_at_random_instants_of_rig_reconstruct(tmp_path: Path) ->
     clean = tmp_path / "clean"
     shutil.copytree(session, clean)
     length = timed_run(reconstruct_args(clean, config))
-    runs = stop_reconstructions(session, config, seed=23, stops=20, length_s=length)
+    runs, _ = stop_reconstructions(session, config, seed=23, stops=20, length_s=length)
     print(f"reconstruct: {length:.1f} s uninterrupted; 20 of {runs} runs stopped by a signal")
     assert main(reconstruct_args(session, config)) == 0
     status = read_status(session / "recon")
