@@ -51,14 +51,17 @@ from calibration.defaults import colorchecker_reflectances
 if TYPE_CHECKING:
     import trimesh
 
+# a stepped trajectory: two rings, each at three distances (× the nominal 0.5 m)
+STEPPED_DISTANCES = (0.7, 1.0, 1.3)
+TWO_RINGS_DEG = (20.0, 45.0)
 SCENES = {
     "spot-stepped": SceneSpec(
         "spot-stepped",
         "spot.obj",
         {"L1": "Sunwayfoto.LED.FL96.at.3000K", "L2": "Sunwayfoto.LED.FL96.at.5500K"},
         "Nikon D700",
-        (0.7, 1.0, 1.3),
-        (20.0, 45.0),
+        STEPPED_DISTANCES,
+        TWO_RINGS_DEG,
     ),
     "cow-ring": SceneSpec(
         "cow-ring",
@@ -74,8 +77,8 @@ SCENES = {
         "nefertiti.obj",
         {"L1": "Toshiba.LED.12W.2700K", "L2": "V.light.LED.2W.6000K"},
         "SONY NEX-5N",
-        (0.7, 1.0, 1.3),
-        (20.0, 45.0),
+        STEPPED_DISTANCES,
+        TWO_RINGS_DEG,
         seed=2,
     ),
     # added after every default was set on the three above: the scene they were not tuned on
@@ -84,8 +87,8 @@ SCENES = {
         "ogre.obj",
         {"L1": "Osram.LED.10W.2700K", "L2": "Amaran.M9.LED.video.light.5500K"},
         "Pentax K-5",
-        (0.7, 1.0, 1.3),
-        (20.0, 45.0),
+        STEPPED_DISTANCES,
+        TWO_RINGS_DEG,
         seed=3,
     ),
     # added after the colour stage's tap weights were set on spot: its held-out scene
@@ -94,8 +97,8 @@ SCENES = {
         "cow.obj",
         {"L1": "Ikea.LED.6.3W.2700K", "L2": "Airam.LED.14W.4000K"},
         "Nikon D5100",
-        (0.7, 1.0, 1.3),
-        (20.0, 45.0),
+        STEPPED_DISTANCES,
+        TWO_RINGS_DEG,
         seed=4,
     ),
 }

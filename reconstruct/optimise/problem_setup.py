@@ -99,7 +99,7 @@ def build_problem(
     keep = np.ones(vertex.size, dtype=bool)
     observed = np.zeros((vertex.size, 3))
     weigh_taps = colour_stage and cfg.tap_gradient_scale > 0 and inp.observed is None
-    taps = np.ones(vertex.size)
+    taps = np.ones(vertex.size if weigh_taps else 0)  # one factor per candidate observation
     if inp.observed is not None:
         observed = inp.observed[vertex, frame]
         keep &= np.all(np.isfinite(observed), axis=1)

@@ -161,8 +161,7 @@ def unmeasured_patches(
     crossing = (labels[edges[:, 0]] != labels[edges[:, 1]]) | border[edges].any(axis=1)
     border[edges[crossing].ravel()] = True
     area = np.zeros(len(vertices))
-    face_area = trimesh.Trimesh(vertices, faces, process=False).area_faces
-    np.add.at(area, faces.ravel(), np.repeat(face_area / 3.0, 3))
+    np.add.at(area, faces.ravel(), np.repeat(trimesh.triangles.area(vertices[faces]) / 3.0, 3))
     inside = ~border & (labels >= 0)
     seen = np.bincount(labels[inside], weights=area[inside], minlength=labels.max() + 1)
     aperture = np.pi * (APERTURE_M / 2) ** 2

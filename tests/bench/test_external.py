@@ -36,6 +36,23 @@ def plate(n: int = 41, half: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.nd
     return vertices, faces, (vertices[:, 0] >= 0).astype(np.int64)
 
 
+def plate_truth(folder: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Path]:
+    """The plate painted blue sky | orange as a truth folder (mesh.ply, reflectance.npy,
+    patch.npy) under ``folder``: its vertices, faces, patch labels, reflectance and the folder."""
+    import trimesh
+
+    from calibration.defaults import colorchecker_reflectances
+
+    vertices, faces, patch = plate()
+    truth = folder / "truth"
+    truth.mkdir()
+    trimesh.Trimesh(vertices, faces, process=False).export(truth / "mesh.ply")
+    reflectance = colorchecker_reflectances()[1][[2, 7]][patch]
+    np.save(truth / "reflectance.npy", reflectance)
+    np.save(truth / "patch.npy", patch)
+    return vertices, faces, patch, reflectance, truth
+
+
 @pytest.fixture(scope="module")
 def plate_render() -> tuple[ShadingRenderer, Pose, np.ndarray]:
     vertices, faces, patch = plate()
@@ -234,18 +251,9 @@ def test_a_third_lamp_is_a_third_illumination_that_lowers_the_floor(
 
 
 def test_on_surface_colour_scores_only_vertices_on_the_true_surface(tmp_path: Path) -> None:
-    import trimesh
-
     from bench.external import ON_SURFACE_M, colour_subsets
-    from calibration.defaults import colorchecker_reflectances
 
-    vertices, faces, patch = plate()
-    truth = tmp_path / "truth"
-    truth.mkdir()
-    trimesh.Trimesh(vertices, faces, process=False).export(truth / "mesh.ply")
-    reflectance = colorchecker_reflectances()[1][[2, 7]][patch]  # blue sky | orange
-    np.save(truth / "reflectance.npy", reflectance)
-    np.save(truth / "patch.npy", patch)
+    vertices, faces, patch, reflectance, truth = plate_truth(tmp_path)
     # the right colour on the surface; a quarter of the vertices lifted off it, and grey
     lifted = np.arange(len(vertices)) % 4 == 0
     moved = vertices + np.where(lifted, 4 * ON_SURFACE_M, 0.0)[:, None] * np.array([0, 0, 1.0])
@@ -287,16 +295,9 @@ def test_colour_inside_patches_leaves_out_the_vertices_at_a_paint_edge(tmp_path:
     import trimesh
 
     from bench.external import PAINT_EDGE_M, colour_subsets, paint_edge_distance
-    from calibration.defaults import colorchecker_reflectances
 
-    vertices, faces, patch = plate()
+    vertices, faces, patch, reflectance, truth = plate_truth(tmp_path)
     mesh = trimesh.Trimesh(vertices, faces, process=False)
-    truth = tmp_path / "truth"
-    truth.mkdir()
-    mesh.export(truth / "mesh.ply")
-    reflectance = colorchecker_reflectances()[1][[2, 7]][patch]  # blue sky | orange
-    np.save(truth / "reflectance.npy", reflectance)
-    np.save(truth / "patch.npy", patch)
     # the two columns either side of the border (5 mm apart) are on it; the next ones 5 mm off
     edge = paint_edge_distance(mesh, patch)
     column = np.round(vertices[:, 0] / 0.005).astype(int)
@@ -315,19 +316,10 @@ def test_colour_inside_patches_leaves_out_the_vertices_at_a_paint_edge(tmp_path:
 
 
 def test_a_patch_seen_only_along_its_border_is_listed_but_not_averaged(tmp_path: Path) -> None:
-    import trimesh
-
     from bench._common import colour_cells
     from bench.external import colour_subsets
-    from calibration.defaults import colorchecker_reflectances
 
-    vertices, faces, patch = plate()
-    truth = tmp_path / "truth"
-    truth.mkdir()
-    trimesh.Trimesh(vertices, faces, process=False).export(truth / "mesh.ply")
-    reflectance = colorchecker_reflectances()[1][[2, 7]][patch]  # blue sky | orange
-    np.save(truth / "reflectance.npy", reflectance)
-    np.save(truth / "patch.npy", patch)
+    vertices, faces, patch, reflectance, truth = plate_truth(tmp_path)
     # patch 1 seen only on its border column, and there read as a mix of both paints
     observed = vertices[:, 0] <= 1e-9
     estimate = np.where((patch == 1)[:, None], reflectance.mean(axis=0), reflectance)
