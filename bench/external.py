@@ -101,6 +101,17 @@ SCENES = {
         TWO_RINGS_DEG,
         seed=4,
     ),
+    # added after the colour stage's residual weights were set on spot and ogre: their
+    # held-out scene
+    "nefertiti-ring": SceneSpec(
+        "nefertiti-ring",
+        "nefertiti.obj",
+        {"L1": "Osram.LED.8W.2700K", "L2": "Philips.LED.T8.10W.840"},
+        "Canon 50D",
+        (1.0,),
+        (30.0,),
+        seed=5,
+    ),
 }
 SIZES = {
     "smoke": Size(width=160, height=120, focal_px=220.0, views=8, spp=16),

@@ -310,6 +310,15 @@ class JointCost:
 
     # --- plain least squares: residual vector and sparse Jacobian ----------------------
 
+    def observation_errors(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rendered − observed RGB of every observation (M, 3), unweighted, and the observed
+        RGB it is the error of (M, 3; a fitted highlight already taken off)."""
+        X, A, light = self.p.unpack(theta)
+        state = self.render(X, A, light, self.geometry(X, derivatives=False).normals, False)
+        o = self.p.obs
+        rendered = state.pair_s[self.obs_pair, None] * state.colours[o.illumination, o.vertex]
+        return state.error, rendered - state.error
+
     def residuals(self, theta: np.ndarray) -> np.ndarray:
         """The residual vector r(θ) with E = Σ r² (rendering, spectral, photometric, geometric)."""
         X, A, light = self.p.unpack(theta)

@@ -18,6 +18,11 @@ scale free as in MVIR.
 Tap weights (the final colour stage): an observation whose bilinear tap sits where the image
 changes fast (a paint, shadow or silhouette edge) reads a mix of two surfaces, so it weighs less
 in the reflectance.
+
+Residual weights (the final colour stage): a vertex whose images disagree with the model at the
+final shape and light (a misplaced thin part, a crumpled patch, a shadow the mesh does not cast)
+has no reflectance that explains them, so its observations weigh less and its neighbours'
+colour, through the photometric smoothness, fills in.
 """
 
 from __future__ import annotations
@@ -71,6 +76,24 @@ def tap_weights(values: np.ndarray, gradient: np.ndarray, scale: float) -> np.nd
     size = np.linalg.norm(values, axis=1)
     g = np.linalg.norm(gradient.reshape(len(gradient), -1), axis=1) / np.maximum(size, 1e-6)
     return np.asarray(1.0 / (1.0 + (g / scale) ** 2))
+
+
+def residual_weights(
+    error: np.ndarray, observed: np.ndarray, vertex: np.ndarray, n_vertices: int, scale: float
+) -> np.ndarray:
+    """Weight per vertex ``1 / (1 + (r / scale)²)``, the Cauchy weight of its relative residual
+    r = √(Σ ‖e‖² / Σ ‖y‖²) over all its observations: rendered − observed ``error`` (M, 3) and
+    ``observed`` RGB (M, 3) of each observation's ``vertex`` (M,). Unobserved vertices: 1.
+
+    >>> e = np.array([[0.01, 0, 0], [0.01, 0, 0], [0.15, 0, 0]])
+    >>> y = np.array([[1.0, 0, 0], [1.0, 0, 0], [1.0, 0, 0]])
+    >>> residual_weights(e, y, np.array([0, 0, 1]), 3, 0.05).round(3).tolist()
+    [0.962, 0.1, 1.0]
+    """
+    squared = np.bincount(vertex, np.einsum("ij,ij->i", error, error), n_vertices)
+    signal = np.bincount(vertex, np.einsum("ij,ij->i", observed, observed), n_vertices)
+    relative = np.sqrt(squared / np.maximum(signal, 1e-12))
+    return np.asarray(1.0 / (1.0 + (relative / scale) ** 2))
 
 
 def edge_scale(vertices: np.ndarray, adjacency: sp.csr_array) -> np.ndarray:
