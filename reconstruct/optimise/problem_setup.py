@@ -203,11 +203,9 @@ def colour_stage_problem(
     if cfg.vertex_residual_scale <= 0 or problem.obs.count == 0:
         return problem
     cost = JointCost(problem, cfg.robust, cfg.robust_scale)
-    error, observed = cost.observation_errors(problem.pack(X, A, light))
+    error, white = cost.observation_errors(problem.pack(X, A, light))
     o, w = problem.obs, problem.weights
-    trust = residual_weights(
-        error, observed, o.vertex, problem.n_vertices, cfg.vertex_residual_scale
-    )
+    trust = residual_weights(error, white, o.vertex, problem.n_vertices, cfg.vertex_residual_scale)
     log.info(
         "residual weights: %d of %d observed vertices weigh below 1/2",
         np.count_nonzero(trust < 0.5),
