@@ -101,8 +101,8 @@ SCENES = {
         TWO_RINGS_DEG,
         seed=4,
     ),
-    # added after the colour stage's residual weights were set on spot and ogre: their
-    # held-out scene
+    # added to judge the colour stage's residual weights, tried on spot and ogre, on a scene
+    # no choice was made on (bench/README.md, "Residual weights")
     "nefertiti-ring": SceneSpec(
         "nefertiti-ring",
         "nefertiti.obj",

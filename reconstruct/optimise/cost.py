@@ -310,14 +310,6 @@ class JointCost:
 
     # --- plain least squares: residual vector and sparse Jacobian ----------------------
 
-    def observation_errors(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Rendered − observed RGB of every observation (M, 3), unweighted, and the RGB a white
-        surface (reflectance 1) would render there (M, 3): the error's scale in reflectance."""
-        X, A, light = self.p.unpack(theta)
-        state = self.render(X, A, light, self.geometry(X, derivatives=False).normals, False)
-        white = self.p.rig.responses.sum(axis=2)[self.p.obs.illumination]
-        return state.error, state.pair_s[self.obs_pair, None] * white
-
     def residuals(self, theta: np.ndarray) -> np.ndarray:
         """The residual vector r(θ) with E = Σ r² (rendering, spectral, photometric, geometric)."""
         X, A, light = self.p.unpack(theta)

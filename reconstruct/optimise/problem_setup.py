@@ -28,12 +28,7 @@ from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
 from reconstruct.optimise.problem import LightMode, Observations, Problem, Rig, Weights
 from reconstruct.optimise.sampling import sample_pairs, taps_valid
 from reconstruct.optimise.settings import OptimiseInput, OptimiseSettings, SettingsLightMode
-from reconstruct.optimise.weights import (
-    edge_scale,
-    photometric_weights,
-    residual_weights,
-    tap_weights,
-)
+from reconstruct.optimise.weights import edge_scale, photometric_weights, tap_weights
 
 log = logging.getLogger(__name__)
 
@@ -190,30 +185,6 @@ def build_problem(
     return Problem(
         inp.faces, n, inp.basis.B, inp.rig, fr, obs, weights, problem_mode(cfg.light_mode)
     )
-
-
-def colour_stage_problem(
-    inp: OptimiseInput, X: np.ndarray, A: np.ndarray, light: np.ndarray, cfg: OptimiseSettings
-) -> Problem:
-    """The final colour stage's problem at shape ``X``, reflectance ``A`` and ``light``: the
-    tap weights of :func:`build_problem`, and with ``cfg.vertex_residual_scale`` each vertex's
-    :func:`residual_weights` there on its observations, so that a vertex no reflectance
-    explains leans on its neighbours' colour."""
-    problem = build_problem(inp, X, light, cfg, colour_stage=True)
-    if cfg.vertex_residual_scale <= 0 or problem.obs.count == 0:
-        return problem
-    cost = JointCost(problem, cfg.robust, cfg.robust_scale)
-    error, white = cost.observation_errors(problem.pack(X, A, light))
-    o, w = problem.obs, problem.weights
-    trust = residual_weights(error, white, o.vertex, problem.n_vertices, cfg.vertex_residual_scale)
-    log.info(
-        "residual weights: %d of %d observed vertices weigh below 1/2",
-        np.count_nonzero(trust < 0.5),
-        np.count_nonzero(o.per_vertex),
-    )
-    factor = np.sqrt(trust)[o.vertex]
-    w.observation = factor if w.observation is None else w.observation * factor
-    return problem
 
 
 def initial_reflectance(

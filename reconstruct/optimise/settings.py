@@ -64,12 +64,6 @@ class OptimiseSettings:
     # gradient at its tap (per pixel): a tap on a paint, shadow or silhouette edge reads a mix
     # of what its pixel covers (bench/README.md, "Edge taps"). 0: no such stage unless gloss.
     tap_gradient_scale: float = bounded(0.3, min=0.0, max=1e6)
-    # The final colour stage: each vertex's observations weighed by the Cauchy weight
-    # 1 / (1 + (r / (vertex_residual_scale · median r))²) of its residual in reflectance units,
-    # r = ‖rendered − observed‖ / ‖what a white surface renders there‖, at the final shape and
-    # light: where no reflectance explains the images (a misplaced thin part, a crumpled
-    # patch) the neighbours' colour fills in (bench/README.md, "Residual weights"). 0: off.
-    vertex_residual_scale: float = bounded(1.0, min=0.0, max=1e6)
     outer_iterations: int = bounded(3, min=0, max=1000)
     light_iterations: int = bounded(15, min=0, max=10_000)
     # Each joint stage does most of its work in its first few steps; the shadow and

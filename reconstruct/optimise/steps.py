@@ -26,7 +26,6 @@ from reconstruct.optimise.mesh import adjacency, vertex_normals
 from reconstruct.optimise.problem import Problem
 from reconstruct.optimise.problem_setup import (
     build_problem,
-    colour_stage_problem,
     initial_reflectance,
     light_positions,
 )
@@ -192,10 +191,8 @@ def optimise(
 
     blurs = coarse_blurs(cfg, inp.observed is None)
     last_outer = len(blurs) + cfg.outer_iterations if cfg.optimise_positions else 0
-    # with the gloss lobe, or edge taps or residuals to weigh in images: a colour stage last
-    colour_stage = cfg.gloss == "fit" or (
-        inp.observed is None and (cfg.tap_gradient_scale > 0 or cfg.vertex_residual_scale > 0)
-    )
+    # with the gloss lobe, or edge taps to weigh in images: a colour stage last
+    colour_stage = cfg.gloss == "fit" or (cfg.tap_gradient_scale > 0 and inp.observed is None)
     last_stage = last_outer + colour_stage
     free_light = cfg.light_mode != "fixed"
     X0 = X.copy()
@@ -242,12 +239,9 @@ def optimise(
         log.info("resuming the optimisation after stage %d (%s)", state.stage, checkpoint)
         history[:], A0 = state.history, state.initial_alpha
         seconds.update(state.seconds)
-        A = project(state.alpha, B, 0.0, upper)
-        if state.done and colour_stage:  # ended on the colour stage's weights
-            problem = colour_stage_problem(inp, state.vertices, A, state.light, cfg)
-        else:
-            problem = build_problem(inp, state.vertices, state.light, cfg)
-        theta = problem.pack(state.vertices, A, state.light)
+        finished = state.done and colour_stage  # ended on the colour stage's weights
+        problem = build_problem(inp, state.vertices, state.light, cfg, colour_stage=finished)
+        theta = problem.pack(state.vertices, project(state.alpha, B, 0.0, upper), state.light)
         # a finished solve goes straight to its uncertainty and the result
         first_outer = last_outer + 1 if state.done else state.stage + 1
     else:
@@ -337,7 +331,8 @@ def optimise(
         # differs. At full resolution and the final shape and light, as a resumed solve
         # rebuilds them.
         t0 = time.perf_counter()
-        problem = colour_stage_problem(inp, *problem.unpack(theta), cfg)
+        X, _, light = problem.unpack(theta)
+        problem = build_problem(inp, X, light, cfg, colour_stage=True)
         seconds["shadows"] = seconds.get("shadows", 0.0) + time.perf_counter() - t0
         theta = run(
             "colour", last_stage, problem, theta, problem.mask(False, True, False),

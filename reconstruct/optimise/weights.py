@@ -18,11 +18,6 @@ scale free as in MVIR.
 Tap weights (the final colour stage): an observation whose bilinear tap sits where the image
 changes fast (a paint, shadow or silhouette edge) reads a mix of two surfaces, so it weighs less
 in the reflectance.
-
-Residual weights (the final colour stage): a vertex whose images disagree with the model at the
-final shape and light (a misplaced thin part, a crumpled patch, a shadow the mesh does not cast)
-has no reflectance that explains them, so its observations weigh less and its neighbours'
-colour, through the photometric smoothness, fills in.
 """
 
 from __future__ import annotations
@@ -76,30 +71,6 @@ def tap_weights(values: np.ndarray, gradient: np.ndarray, scale: float) -> np.nd
     size = np.linalg.norm(values, axis=1)
     g = np.linalg.norm(gradient.reshape(len(gradient), -1), axis=1) / np.maximum(size, 1e-6)
     return np.asarray(1.0 / (1.0 + (g / scale) ** 2))
-
-
-def residual_weights(
-    error: np.ndarray, white: np.ndarray, vertex: np.ndarray, n_vertices: int, scale: float
-) -> np.ndarray:
-    """Weight per vertex ``1 / (1 + (r / (scale · median r))²)``: the Cauchy weight of its
-    residual in reflectance units r = √(Σ ‖e‖² / Σ ‖w‖²) over all its observations (rendered −
-    observed ``error`` (M, 3) against what a ``white`` surface renders there (M, 3), for each
-    observation's ``vertex`` (M,)), against the observed vertices' median. In reflectance
-    rather than relative to the vertex's own signal, so that a dark paint is not distrusted for
-    the light its bright neighbours bleed into its taps; against the median, so that a noisier
-    capture's noise does not weigh every vertex down. Unobserved vertices: 1.
-
-    >>> e = np.array([[0.01, 0, 0], [0.01, 0, 0], [0.03, 0, 0], [0.01, 0, 0]])
-    >>> w = np.ones((4, 3)) / np.sqrt(3)
-    >>> residual_weights(e, w, np.array([0, 0, 1, 2]), 4, 1.0).round(3).tolist()
-    [0.5, 0.1, 0.5, 1.0]
-    """
-    squared = np.bincount(vertex, np.einsum("ij,ij->i", error, error), n_vertices)
-    signal = np.bincount(vertex, np.einsum("ij,ij->i", white, white), n_vertices)
-    residual = np.sqrt(squared / np.maximum(signal, 1e-12))
-    seen = signal > 0
-    typical = float(np.median(residual[seen])) if seen.any() else 0.0
-    return np.asarray(1.0 / (1.0 + (residual / max(scale * typical, 1e-12)) ** 2))
 
 
 def edge_scale(vertices: np.ndarray, adjacency: sp.csr_array) -> np.ndarray:

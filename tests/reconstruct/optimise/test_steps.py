@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any
 
 import numpy as np
 import pytest
@@ -11,20 +10,11 @@ import trimesh
 
 from calibration.bounds import ROUND_OFF
 from reconstruct.optimise.mesh import adjacency, edges
-from reconstruct.optimise.problem_setup import (
-    build_problem,
-    colour_stage_problem,
-    initial_reflectance,
-)
+from reconstruct.optimise.problem_setup import build_problem, initial_reflectance
 from reconstruct.optimise.settings import OptimiseSettings
 from reconstruct.optimise.steps import optimise
 from reconstruct.optimise.synthetic import SyntheticScene, perturb
-from reconstruct.optimise.weights import (
-    edge_scale,
-    photometric_weights,
-    residual_weights,
-    tap_weights,
-)
+from reconstruct.optimise.weights import edge_scale, photometric_weights, tap_weights
 from reconstruct.outputs.evaluate import surface_distance
 
 
@@ -109,53 +99,6 @@ def test_tap_weights_halve_where_the_relative_gradient_reaches_the_scale() -> No
     gradient[1, :, 0] = 0.06  # grey brightening by 30 % per pixel
     gradient[2, 0, 1], gradient[2, 1, 1] = 0.110227, -0.110227  # red to green, one brightness
     assert tap_weights(values, gradient, 0.3) == pytest.approx([1.0, 0.5, 0.1], abs=1e-6)
-
-
-def test_residual_weights_halve_at_the_median_residual_in_reflectance() -> None:
-    white = np.array([[0.5, 0.5, 0.5], [0.1, 0.1, 0.1], [0.4, 0.0, 0.0]])
-    error = np.array([[0.0025, 0.0025, 0.0025], [0.001, 0.001, 0.001], [0.012, 0.0, 0.0]])
-    # r: vertex 0 0.005, 1 (a dark paint's small error) 0.01, 2 0.03; median 0.01; 3 unseen
-    weight = residual_weights(error, white, np.array([0, 1, 2]), 4, 1.0)
-    assert weight == pytest.approx([0.8, 0.5, 0.1, 1.0])
-    wider = residual_weights(error, white, np.array([0, 1, 2]), 4, 2.0)
-    assert wider[2] == pytest.approx(1 / (1 + 1.5**2))
-
-
-def test_colour_stage_lets_neighbours_fill_where_no_reflectance_explains_the_images(
-    image_scene: SyntheticScene,
-) -> None:
-    # a shadow the mesh does not cast: the pixels of a few vertices darken in half of the views
-    X, light, fr, rig = (
-        image_scene.vertices, image_scene.light_offset[None], image_scene.frames, image_scene.rig
-    )
-    near = np.linalg.norm(X - X[np.argmax(X[:, 0] + 0.3 * X[:, 2])], axis=1) < 0.012
-    images = np.array(fr.images, copy=True)
-    for f in np.flatnonzero(fr.view % 2 == 0):
-        c = fr.view[f]
-        uv = rig.intrinsics[c].project_camera(rig.poses[c].to_camera(X[near]))
-        for u, v in np.round(uv[image_scene.visibility[near, c]]).astype(int):
-            images[f, max(v - 3, 0) : v + 4, max(u - 3, 0) : u + 4] *= 0.3
-    inp = replace(
-        image_scene.input(images=True), frames=replace(fr, images=images), initial_light=light
-    )
-    base = OptimiseSettings(optimise_positions=False, light_iterations=10, joint_iterations=10)
-    off = optimise(inp, replace(base, vertex_residual_scale=0.0))
-    on = optimise(inp, base)
-    problem = colour_stage_problem(inp, X, on.alpha, on.light, base)
-    factor = problem.weights.observation
-    assert factor is not None
-    darkened = near[problem.obs.vertex]
-    assert np.median(factor[darkened]) < 0.3 * np.median(factor[~darkened])
-
-    def error(res: Any) -> tuple[float, float]:
-        e = np.sqrt(np.mean((res.reflectance - image_scene.reflectance) ** 2, axis=1))
-        return float(e[near].mean()), float(e[~near & res.observed].mean())
-
-    # closer where the images lie and no worse elsewhere; on this coarse sphere the darkened
-    # vertices' own photometric weights keep most of their neighbours' colour out (the
-    # full-size gain: bench/README.md, "Residual weights")
-    (near_off, rest_off), (near_on, rest_on) = error(off), error(on)
-    assert near_on < near_off and rest_on < 1.02 * rest_off
 
 
 def test_colour_stage_weighs_taps_on_paint_edges_less(image_scene: SyntheticScene) -> None:
