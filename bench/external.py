@@ -54,6 +54,10 @@ if TYPE_CHECKING:
 # a stepped trajectory: two rings, each at three distances (× the nominal 0.5 m)
 STEPPED_DISTANCES = (0.7, 1.0, 1.3)
 TWO_RINGS_DEG = (20.0, 45.0)
+# one ring at the nominal distance, as many users capture (which leaves the light's distance
+# weakly observed)
+ONE_DISTANCE = (1.0,)
+ONE_RING_DEG = (30.0,)
 SCENES = {
     "spot-stepped": SceneSpec(
         "spot-stepped",
@@ -68,8 +72,8 @@ SCENES = {
         "cow.obj",
         {"L1": "elgato:at.2900K.dimmed.to.100pc", "L2": "elgato:at.7000K.dimmed.to.100pc"},
         "Canon 600D",
-        (1.0,),
-        (30.0,),
+        ONE_DISTANCE,
+        ONE_RING_DEG,
         seed=1,
     ),
     "nefertiti-stepped": SceneSpec(
@@ -108,8 +112,8 @@ SCENES = {
         "nefertiti.obj",
         {"L1": "Osram.LED.8W.2700K", "L2": "Philips.LED.T8.10W.840"},
         "Canon 50D",
-        (1.0,),
-        (30.0,),
+        ONE_DISTANCE,
+        ONE_RING_DEG,
         seed=5,
     ),
 }
