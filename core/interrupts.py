@@ -1,8 +1,10 @@
 """SIGINT and SIGTERM for `rig`, from a command's first instant to its exit: the first one
 raises :class:`Interrupted` (a KeyboardInterrupt, so running code saves its state as for
 Ctrl-C) and the command exits 128 + its number with one line; later ones are noted, never
-raised, so the state being saved is not cut short. Outside a command (start-up, exit) a
-signal ends the process at once with the same status and line.
+raised, so the state being saved is not cut short. A stop that code swallowed (a library or an
+extension module's init that clears every error) is raised again at the command's next log
+line. Outside a command (start-up, exit) a signal ends the process at once with the same status
+and line.
 
 Imports only the standard library: it is installed before anything heavy is imported.
 """
@@ -38,7 +40,8 @@ class Interrupted(KeyboardInterrupt):
 class _State:
     first: int | None = None  # the first signal since install()
     raising = False  # a command runs: the first signal raises Interrupted
-    stopped = False  # a command was stopped and said so: the rest is the interpreter's exit
+    raised = False  # the first signal was raised as Interrupted: it must reach the command
+    stopped = False  # a command was stopped and says so: the rest is the interpreter's exit
 
 
 _state = _State()
@@ -60,8 +63,9 @@ def received() -> int | None:
 
 
 def mark_stopped() -> None:
-    """The stop line is out: finalisers of objects the signal left half-built (a compiler's
-    handle, a socket) that fail from now to the exit are logged, not printed after it."""
+    """The command has taken its stop and is saying so: the stop is not raised again, and
+    finalisers of objects the signal left half-built (a compiler's handle, a socket) that fail
+    from now to the exit are logged, not printed after the stop line."""
     _state.stopped = True
 
 
@@ -76,8 +80,29 @@ def _handle(signum: int, frame: FrameType | None) -> None:
         return  # already stopping
     _state.first = signum
     if _state.raising:
+        _state.raised = True
         raise Interrupted(signum)
     _exit_now(signum)
+
+
+def _lost_stop() -> Interrupted | None:
+    """The stop raised earlier, when the main thread runs on as if it never came: not stopped,
+    and not inside an ``except`` or ``finally`` that is handling it (saving state)."""
+    if not _state.raised or _state.stopped or _state.first is None or not _in_main_thread():
+        return None
+    return None if _handling_a_stop() else Interrupted(_state.first)
+
+
+def _handling_a_stop() -> bool:
+    """An Interrupted is the exception being handled, or what led to it (``raise ... from``)."""
+    error = sys.exc_info()[1]
+    seen: set[int] = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, Interrupted):
+            return True
+        seen.add(id(error))
+        error = error.__context__
+    return False
 
 
 def _exit_now(signum: int) -> None:
@@ -103,6 +128,7 @@ def handlers() -> dict[int, Handler]:
 def restore(previous: dict[int, Handler]) -> None:
     """The handlers as they were before :func:`install`; the command's signal is forgotten."""
     _state.raising = False
+    _state.raised = False
     _state.first = None
     for sig, handler in previous.items():
         signal.signal(sig, signal.SIG_DFL if handler is None else handler)
@@ -115,7 +141,9 @@ def _set_handlers() -> None:
 
 def _reraise_logged_stops() -> None:
     """Libraries that catch BaseException and log it (trimesh does, with a traceback) would
-    swallow the stop: a log record carrying :class:`Interrupted` raises it again instead."""
+    swallow the stop: a log record carrying :class:`Interrupted` raises it again instead. So
+    does any log record made while a swallowed stop is lost (:func:`_lost_stop`): every stage
+    of a long command logs, so it stops there rather than running to its end."""
     make = logging.getLogRecordFactory()
     if getattr(make, "reraises_stops", False):
         return
@@ -124,6 +152,9 @@ def _reraise_logged_stops() -> None:
         record = make(*args, **kwargs)
         if record.exc_info and isinstance(record.exc_info[1], Interrupted):
             raise record.exc_info[1]
+        lost = _lost_stop()
+        if lost is not None:
+            raise lost
         return record
 
     factory.reraises_stops = True  # type: ignore[attr-defined]
@@ -163,7 +194,9 @@ def _redeliver_unraisable_stops() -> None:
                     unraisable.object,
                     exc_info=(unraisable.exc_type, unraisable.exc_value, unraisable.exc_traceback),
                 )
-            except Exception:  # logging already shut down at exit: nothing left to tell
+            # logging shut down at exit, or a lost stop: nothing can leave this hook, and the
+            # stop is raised again at the command's next log line
+            except BaseException:
                 pass
             return
         previous(unraisable)
@@ -179,6 +212,7 @@ def install(*, raising: bool = True) -> None:
     if not _in_main_thread():
         return
     _state.first = None
+    _state.raised = False
     _state.stopped = False
     _state.raising = raising
     _set_handlers()

@@ -164,6 +164,7 @@ def _stopped(parsed: list[argparse.Namespace]) -> int:
     """The line for a stop by signal, with how to resume when the command knows."""
     # a KeyboardInterrupt no handler of ours saw is Ctrl-C (at a prompt, in a thread)
     signum = interrupts.received() or signal.SIGINT
+    interrupts.mark_stopped()  # before the hint, which may log
     hint = ""
     stop_hint = getattr(parsed[0], "stop_hint", None) if parsed else None
     if stop_hint is not None:
@@ -172,7 +173,6 @@ def _stopped(parsed: list[argparse.Namespace]) -> int:
         except Exception:  # the stop itself is what must be reported
             hint = ""
     print(printable(interrupts.stop_line(signum, hint)), file=sys.stderr, flush=True)
-    interrupts.mark_stopped()
     return interrupts.exit_status(signum)
 
 

@@ -100,6 +100,75 @@ def test_a_stop_a_library_catches_and_logs_is_raised_again(
     assert went_on == []
 
 
+STAGE_LOG = logging.getLogger("tests.interrupts.stage")  # a command's progress lines
+STAGE_LOG.setLevel(logging.INFO)
+
+
+def test_a_stop_a_library_swallows_is_raised_at_the_next_log_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An extension module's init (or any C code) that clears every error loses the stop; the
+    command must not run on to its end."""
+    went_on: list[str] = []
+
+    def command(args: argparse.Namespace) -> int:
+        try:
+            kill_self(signal.SIGTERM)
+        except BaseException:
+            pass  # cleared, with nothing said
+        went_on.append("the library's caller")
+        STAGE_LOG.info("next stage: running")
+        went_on.append("the next stage")
+        return 0
+
+    assert run_with(monkeypatch, command) == 143
+    one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
+    assert went_on == ["the library's caller"]
+
+
+@pytest.mark.parametrize("converted", [False, True])
+def test_log_lines_while_the_stop_is_handled_do_not_raise_it_again(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], converted: bool
+) -> None:
+    """Saving state logs (the status, the timings), in a ``finally`` or in an ``except`` that
+    turns the stop into the caller's own error."""
+    saved: list[str] = []
+
+    def command(args: argparse.Namespace) -> int:
+        try:
+            try:
+                kill_self(signal.SIGTERM)
+            except KeyboardInterrupt as stop:
+                if converted:
+                    raise RuntimeError("stopped while saving") from stop
+                raise
+        finally:
+            STAGE_LOG.info("status: interrupted")
+            saved.append("state")
+        return 0
+
+    assert run_with(monkeypatch, command) == 143
+    one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
+    assert saved == ["state"]
+
+
+def test_a_signal_the_command_took_itself_is_not_raised_at_its_log_lines(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The capture loop's first signal finishes the frame in flight, which logs."""
+    finished: list[str] = []
+
+    def command(args: argparse.Namespace) -> int:
+        interrupts.note(signal.SIGTERM)
+        STAGE_LOG.info("frame 12: saved")
+        finished.append("the frame in flight")
+        return 0
+
+    assert run_with(monkeypatch, command) == 143
+    one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
+    assert finished == ["the frame in flight"]
+
+
 def test_a_stop_raised_in_a_finaliser_is_delivered_again(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
