@@ -8,8 +8,14 @@ scale (the specular reflectance, ≥ 0) by least squares beside the same lobe in
 own colour (a shading error near the mirror direction, which is not gloss and is left in).
 The stage then subtracts its predicted highlight from each observation
 (``Weights.observed_offset``), so light and shape are fitted to the diffuse part; inside a
-stage the highlight is frozen, as the shadow masks are. The reflectance is solved once more at
-the end without it (:func:`reconstruct.optimise.steps.optimise`).
+stage the highlight is frozen, as the shadow masks are.
+
+The final colour stage solves the reflectance from the observations as they are, then fits the
+lobe against that reflectance and, when it explains a good share of the residual
+(:func:`colour_without_gloss`), solves again with it taken off: left in, the gloss would
+brighten every colour towards the lamp's. Fitted against a reflectance solved with a lobe
+already off, the two trade brightness (a broader, stronger lobe and a darker surface explain
+the same pixels); against one solved with none, the lobe is what no reflectance explains.
 """
 
 from __future__ import annotations
@@ -27,6 +33,10 @@ from reconstruct.optimise.problem import Problem
 log = logging.getLogger(__name__)
 
 ROUGHNESS = (0.05, 0.1, 0.15, 0.2, 0.3, 0.45, 0.7)  # GGX α tried: mirror-like to satin
+# the share of the residual the lobe must explain to be taken off the colour stage: on a matte
+# object it explains a sliver (shading errors near the mirror direction, which a broad lobe
+# fits and whose removal would move the colour where they sit); on a glossy one, most of it
+COLOUR_EXPLAINED_MIN = 0.1
 
 
 @dataclass(frozen=True)
@@ -99,9 +109,29 @@ def _neutral_scale(residual: np.ndarray, neutral: np.ndarray, coloured: np.ndarr
 
 def without_gloss(problem: Problem, theta: np.ndarray) -> tuple[Problem, GlossFit]:
     """``problem`` with the fitted lobe's highlight taken off every observation, and the fit."""
+    fit = _logged_fit(problem, theta)
+    return _taken_off(problem, fit), fit
+
+
+def colour_without_gloss(problem: Problem, theta: np.ndarray) -> tuple[Problem, GlossFit | None]:
+    """For the colour stage: ``problem`` with the lobe's highlight taken off when the lobe
+    explains at least :data:`COLOUR_EXPLAINED_MIN` of the residual, and that fit; else
+    ``problem`` as it is and None."""
+    fit = _logged_fit(problem, theta)
+    if fit.explained < COLOUR_EXPLAINED_MIN:
+        log.info("gloss: left in for the colour stage, too little of the residual to be gloss")
+        return problem, None
+    return _taken_off(problem, fit), fit
+
+
+def _logged_fit(problem: Problem, theta: np.ndarray) -> GlossFit:
     fit = fit_gloss(problem, theta)
     log.info(
         "gloss: specular %.3g, roughness %.2g, %.1f %% of the diffuse residual explained",
         fit.specular, fit.roughness, 100 * fit.explained,
     )
-    return replace(problem, weights=replace(problem.weights, observed_offset=fit.highlight)), fit
+    return fit
+
+
+def _taken_off(problem: Problem, fit: GlossFit) -> Problem:
+    return replace(problem, weights=replace(problem.weights, observed_offset=fit.highlight))

@@ -21,7 +21,7 @@ from calibration.bounds import project
 from core.errors import RigError
 from reconstruct.optimise.checkpoint import Checkpoint, OptimiseState
 from reconstruct.optimise.cost import JointCost
-from reconstruct.optimise.gloss import GlossFit, without_gloss
+from reconstruct.optimise.gloss import GlossFit, colour_without_gloss, without_gloss
 from reconstruct.optimise.mesh import adjacency, vertex_normals
 from reconstruct.optimise.problem import Problem
 from reconstruct.optimise.problem_setup import (
@@ -326,10 +326,8 @@ def optimise(
             break
     if last_stage > last_outer and not (state is not None and state.done):
         # the reflectance once more from the observations as they are (highlights down-weighted
-        # when that is on), edge taps weighing less: the fitted lobe places the light and the
-        # shape, but one roughness and one scale per object misplace colour where the real lobe
-        # differs. At full resolution and the final shape and light, as a resumed solve
-        # rebuilds them.
+        # when that is on), edge taps weighing less, at full resolution and the final shape and
+        # light, as a resumed solve rebuilds them
         t0 = time.perf_counter()
         X, _, light = problem.unpack(theta)
         problem = build_problem(inp, X, light, cfg, colour_stage=True)
@@ -338,6 +336,13 @@ def optimise(
             "colour", last_stage, problem, theta, problem.mask(False, True, False),
             cfg.joint_iterations,
         )
+        if cfg.gloss == "fit":  # and again with the lobe off, where it is the gloss
+            glossless, gloss = colour_without_gloss(problem, theta)
+            if gloss is not None:
+                theta = run(
+                    "colour", last_stage + 1, glossless, theta,
+                    problem.mask(False, True, False), cfg.joint_iterations, gloss=gloss,
+                )
         save(last_stage, True, theta, problem)
     t0 = time.perf_counter()
     if problem.frames is not inp.frames:  # ended on a coarse level: judge it at full resolution
