@@ -90,18 +90,18 @@ def _lost_stop() -> Interrupted | None:
     and not inside an ``except`` or ``finally`` that is handling it (saving state)."""
     if not _state.raised or _state.stopped or _state.first is None or not _in_main_thread():
         return None
-    return None if _handling_a_stop() else Interrupted(_state.first)
+    return None if raised_by_a_stop(sys.exc_info()[1]) else Interrupted(_state.first)
 
 
-def _handling_a_stop() -> bool:
-    """An Interrupted is the exception being handled, or what led to it (``raise ... from``)."""
-    error = sys.exc_info()[1]
+def raised_by_a_stop(error: BaseException | None) -> bool:
+    """Whether ``error`` is a Ctrl-C / SIGTERM stop or came while one unwound (a library that
+    catches the interrupt and raises its own error, or a cleanup that failed on the way out)."""
     seen: set[int] = set()
     while error is not None and id(error) not in seen:
-        if isinstance(error, Interrupted):
+        if isinstance(error, KeyboardInterrupt):
             return True
         seen.add(id(error))
-        error = error.__context__
+        error = error.__cause__ or error.__context__
     return False
 
 

@@ -193,7 +193,7 @@ def tracked(recon_dir: Path) -> Iterator[RunStatus]:
         status.end_after_error("interrupted", note="stopped by Ctrl-C or SIGTERM")
         raise
     except Exception as error:
-        if _raised_by_a_stop(error) or interrupts.received() is not None:
+        if interrupts.raised_by_a_stop(error) or interrupts.received() is not None:
             status.end_after_error("interrupted", note="stopped by Ctrl-C or SIGTERM")
         else:
             status.end_after_error("failed", error=" ".join(str(error).split()))
@@ -203,16 +203,3 @@ def tracked(recon_dir: Path) -> Iterator[RunStatus]:
             status.end("complete")
     finally:
         status.release()
-
-
-def _raised_by_a_stop(error: BaseException) -> bool:
-    """Whether ``error`` came while a Ctrl-C / SIGTERM unwound (a library that catches the
-    interrupt and raises its own error, or a cleanup that failed on the way out)."""
-    seen: set[int] = set()
-    current: BaseException | None = error
-    while current is not None and id(current) not in seen:
-        if isinstance(current, KeyboardInterrupt):
-            return True
-        seen.add(id(current))
-        current = current.__cause__ or current.__context__
-    return False

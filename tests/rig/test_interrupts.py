@@ -43,6 +43,19 @@ def one_stop_line(err: str, name: str, code: int) -> None:
     assert "Traceback" not in err and "internal error" not in err
 
 
+def stopped_by_sigterm(
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    command: Callable[[argparse.Namespace], int],
+) -> str:
+    """Run ``command`` as :func:`run_with` does; it must end 143 with the one stop line.
+    Returns what it printed on stderr."""
+    assert run_with(monkeypatch, command) == 143
+    err = capsys.readouterr().err
+    one_stop_line(err, "SIGTERM", 143)
+    return err
+
+
 @pytest.mark.parametrize(("signum", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_a_signal_during_a_command_exits_128_plus_its_number(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], signum: int, code: int
@@ -76,8 +89,7 @@ def test_a_second_signal_while_saving_state_is_noted_not_raised(
             saved.append("state")
         return 0
 
-    assert run_with(monkeypatch, command) == 143
-    one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
+    stopped_by_sigterm(monkeypatch, capsys, command)
     assert saved == ["state"]
 
 
@@ -95,8 +107,7 @@ def test_a_stop_a_library_catches_and_logs_is_raised_again(
         went_on.append("the library's fallback")
         return 0
 
-    assert run_with(monkeypatch, command) == 143
-    one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
+    stopped_by_sigterm(monkeypatch, capsys, command)
     assert went_on == []
 
 
@@ -121,8 +132,7 @@ def test_a_stop_a_library_swallows_is_raised_at_the_next_log_line(
         went_on.append("the next stage")
         return 0
 
-    assert run_with(monkeypatch, command) == 143
-    one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
+    stopped_by_sigterm(monkeypatch, capsys, command)
     assert went_on == ["the library's caller"]
 
 
@@ -147,8 +157,7 @@ def test_log_lines_while_the_stop_is_handled_do_not_raise_it_again(
             saved.append("state")
         return 0
 
-    assert run_with(monkeypatch, command) == 143
-    one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
+    stopped_by_sigterm(monkeypatch, capsys, command)
     assert saved == ["state"]
 
 
@@ -164,8 +173,7 @@ def test_a_signal_the_command_took_itself_is_not_raised_at_its_log_lines(
         finished.append("the frame in flight")
         return 0
 
-    assert run_with(monkeypatch, command) == 143
-    one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
+    stopped_by_sigterm(monkeypatch, capsys, command)
     assert finished == ["the frame in flight"]
 
 
@@ -185,9 +193,7 @@ def test_a_stop_raised_in_a_finaliser_is_delivered_again(
         went_on.append("after the finaliser")
         return 0
 
-    assert run_with(monkeypatch, command) == 143
-    err = capsys.readouterr().err
-    one_stop_line(err, "SIGTERM", 143)
+    err = stopped_by_sigterm(monkeypatch, capsys, command)
     assert "Exception ignored" not in err and went_on == []
 
 
@@ -201,8 +207,7 @@ def test_a_failure_the_signal_caused_is_reported_as_the_signal(
             raise RuntimeError("Cannot import the C++ backend") from exc
         return 0
 
-    assert run_with(monkeypatch, command) == 143
-    one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
+    stopped_by_sigterm(monkeypatch, capsys, command)
 
 
 def test_a_signal_the_command_took_itself_still_sets_the_exit_status(
@@ -214,8 +219,7 @@ def test_a_signal_the_command_took_itself_still_sets_the_exit_status(
         interrupts.note(signal.SIGTERM)
         return 0
 
-    assert run_with(monkeypatch, command) == 143
-    one_stop_line(capsys.readouterr().err, "SIGTERM", 143)
+    stopped_by_sigterm(monkeypatch, capsys, command)
 
 
 def test_the_stop_line_says_how_to_resume_a_capture(
