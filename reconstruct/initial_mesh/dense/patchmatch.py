@@ -68,7 +68,7 @@ class PatchMatchConfig:
     hull_margin: float = bounded(0.5, min=0.0, max=10.0)
     cost_max: float = bounded(0.5, min=0.0, max=2.0)
     min_texture: float = bounded(0.02, min=0.0, max=10.0)
-    consistency_px: float = bounded(1.0, min=0.0, max=1000.0)
+    consistency_px: float = bounded(0.5, min=0.0, max=1000.0)
     consistency_depth: float = bounded(0.005, min=0.0, max=1.0)
     min_consistent: int = bounded(2, min=1, max=64)
     # planes seen more obliquely than this are not proposed
