@@ -6,6 +6,7 @@ solve runs in a fresh process that only loads its input."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -167,7 +168,8 @@ def cached_scene(
     cache.mkdir(parents=True, exist_ok=True)
     path = cache / f"scene_{n_vertices}_{n_views}v_{width}x{height}_s{seed}.npz"
     if not path.is_file():
-        tmp = path.with_suffix(".tmp.npz")
+        # per process: runs sharing a cache may build the same scene at once
+        tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
         save_scene(build_scene(n_vertices, n_views, width, height, seed), tmp)
         tmp.replace(path)
     return path

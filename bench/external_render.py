@@ -277,7 +277,8 @@ class ShadingRenderer:
         out = out.astype(np.float16).astype(np.float32)
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_suffix(".tmp.npz")
+            # per process: runs sharing a cache may render the same frame at once
+            tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
             np.savez_compressed(tmp, shading=out.astype(np.float16))
             tmp.replace(path)
         return out
