@@ -82,6 +82,12 @@ def peak_rss_mb() -> float:
     return peak / 1024 if sys.platform != "darwin" else peak / 1024**2
 
 
+def cache_temporary(path: Path) -> Path:
+    """The name a cache file is written under before its rename: one per process, since runs
+    sharing a cache may write the same file at once."""
+    return path.with_name(f"{path.stem}.{os.getpid()}.tmp{path.suffix}")
+
+
 class ResultTable:
     """Rows shown as a rich table and kept as markdown for the README."""
 

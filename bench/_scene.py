@@ -6,13 +6,13 @@ solve runs in a fresh process that only loads its input."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 from rich.progress import Progress
 from scipy.spatial import ConvexHull
 
+from bench._common import cache_temporary
 from calibration.basis import default_basis
 from calibration.defaults import (
     colorchecker_reflectances,
@@ -168,8 +168,7 @@ def cached_scene(
     cache.mkdir(parents=True, exist_ok=True)
     path = cache / f"scene_{n_vertices}_{n_views}v_{width}x{height}_s{seed}.npz"
     if not path.is_file():
-        # per process: runs sharing a cache may build the same scene at once
-        tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
+        tmp = cache_temporary(path)
         save_scene(build_scene(n_vertices, n_views, width, height, seed), tmp)
         tmp.replace(path)
     return path

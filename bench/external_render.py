@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from bench._common import cache_temporary
 from bench.external_optics import IDEAL, Optics, sphere_radiance
 from core.errors import RigError
 from core.install import install_command
@@ -277,8 +278,7 @@ class ShadingRenderer:
         out = out.astype(np.float16).astype(np.float32)
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
-            # per process: runs sharing a cache may render the same frame at once
-            tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
+            tmp = cache_temporary(path)
             np.savez_compressed(tmp, shading=out.astype(np.float16))
             tmp.replace(path)
         return out
