@@ -71,7 +71,9 @@ class MeshConfig:
     of poorly posed views; unset: 2 px for ``patchmatch``, whose search the hull only bounds
     and must not cut off at the rim, 0 for the methods whose surface is the hull's);
     ``carve_votes``: how many views must see a voxel as background
-    to carve it (2 forgives a shadow touching one view's outline); ``method``:
+    to carve it (unset: 3 for ``patchmatch``, whose search the hull only bounds, which forgives
+    a cast shadow as dark as the background cutting a limb's outline in two views; 2 for the
+    methods whose surface is the hull's, which a looser hull would cost accuracy); ``method``:
     ``visual_hull`` alone, ``hull_stereo`` which adds hull-guided NCC plane-sweep stereo
     for what silhouettes miss (concavities), or ``patchmatch``: per-view PatchMatch depth and
     normal maps searched within the hull's bounds, fused, and meshed without hull points
@@ -86,6 +88,14 @@ class MeshConfig:
     def __post_init__(self) -> None:
         self.board_spec()  # a malformed board fails here, naming the key
 
+    def hull_votes(self, hull_is_surface: bool | None = None) -> int:
+        """``carve_votes``, or its default: 2 where the hull is the surface (by default for
+        every method but ``patchmatch``), 3 where it only bounds PatchMatch's search."""
+        if self.carve_votes is not None:
+            return self.carve_votes
+        surface = self.method != "patchmatch" if hull_is_surface is None else hull_is_surface
+        return 2 if surface else 3
+
     def board_spec(self) -> BoardSpec | None:
         if self.board is None or isinstance(self.board, BoardSpec):
             return self.board
@@ -95,7 +105,7 @@ class MeshConfig:
     voxels: int = bounded(96, min=4, max=2048)
     poisson_trim: float = bounded(5.0, min=0.0, max=1000.0)
     mask_dilate_px: int | None = bounded(None, min=0, max=1000)
-    carve_votes: int = bounded(2, min=1, max=1000)
+    carve_votes: int | None = bounded(None, min=1, max=1000)
     min_views: int = bounded(3, min=1, max=1000)
     fill_unseen_from_hull: bool = False
     # Poisson's OpenMP threads; more only pay on an idle many-core host
@@ -197,6 +207,7 @@ def dense_mesh(
     dilate_px = conf.mask_dilate_px
     if dilate_px is None:
         dilate_px = 2 if conf.method == "patchmatch" else 0
+    votes = conf.hull_votes()
     masks, grey = view_masks(decoded_dir, sorted(poses), dilate_px, board, intrinsics, poses)
     floor = None if board is None else conf.floor_margin_m
     if len(masks) < conf.min_views:
@@ -211,15 +222,17 @@ def dense_mesh(
         cv2.imwrite(str(out_dir / "masks" / f"view_{view:04d}.png"), mask.astype(np.uint8) * 255)
     sparse = np.load(poses_dir / POINTS)
 
-    def hull(masks: dict[int, np.ndarray]) -> tuple[trimesh.Trimesh, np.ndarray, np.ndarray, float]:
+    def hull(
+        masks: dict[int, np.ndarray], votes: int
+    ) -> tuple[trimesh.Trimesh, np.ndarray, np.ndarray, float]:
         points, normals, voxel = visual_hull_points(
-            masks, intrinsics, poses, sparse, conf.voxels, conf.carve_votes, floor
+            masks, intrinsics, poses, sparse, conf.voxels, votes, floor
         )
         mesh = poisson_mesh(points, normals, depth, conf.poisson_trim, conf.num_threads)
         return mesh, points, normals, voxel
 
     depth = int(np.ceil(np.log2(conf.voxels)))
-    mesh, points, normals, voxel = hull(masks)
+    mesh, points, normals, voxel = hull(masks, votes)
     hull_surface = mesh
     info: dict[str, Any] = {"method": "visual_hull+poisson", "views": len(masks), "voxel": voxel,
                             "hull_points": len(points), "poisson_depth": depth,
@@ -251,10 +264,13 @@ def dense_mesh(
                 "image size); the initial mesh is the visual hull", len(pm),
             )
             info["method"] = "visual_hull+poisson (patchmatch matched too few points)"
-            if dilate_px:  # the hull is the surface now: carve it from the tight silhouettes
+            surface_votes = conf.hull_votes(hull_is_surface=True)
+            if dilate_px or surface_votes != votes:
+                # the hull is the surface now: carve it as the hull methods do, from the tight
+                # silhouettes with their vote
                 kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * dilate_px + 1,) * 2)
                 mesh = hull({v: cv2.erode(m.astype(np.uint8), kernel) > 0
-                             for v, m in masks.items()})[0]
+                             for v, m in masks.items()}, surface_votes)[0]
         else:
             hp, hn = pm[:0], pn[:0]
             if conf.fill_unseen_from_hull:
@@ -263,8 +279,7 @@ def dense_mesh(
             depth = conf.patchmatch.poisson_depth
             mesh = poisson_mesh(np.vstack([pm, hp]), np.vstack([pn, hn]), depth,
                                 conf.patchmatch.poisson_trim, conf.num_threads)
-            moved = clip_to_hull(mesh, hull_mesh, pm, voxel, masks, intrinsics, poses,
-                                 conf.carve_votes)
+            moved = clip_to_hull(mesh, hull_mesh, pm, voxel, masks, intrinsics, poses, votes)
             info |= {"method": "visual_hull_bounded_patchmatch+poisson",
                      "poisson_depth": depth, "hull_points_kept": len(hp),
                      "vertices_clipped_to_hull": moved}

@@ -53,9 +53,9 @@ class PatchMatchConfig:
     of the hull's largest extent; ``min_texture``: a window's RMS after its intensity planes are
     removed, relative to its mean level, below which it has nothing to match; ``cost_max``:
     1 - NCC above which a pixel is dropped; ``consistency_px`` / ``consistency_depth``: a point
-    is confirmed by another view when it reprojects into that view's depth map within this
-    many pixels and relative depth; ``min_consistent``: views that must confirm a point;
-    ``seed``: random hypotheses."""
+    is confirmed by another view when that view's depth, read where the point projects, puts
+    it back within this many pixels of its own pixel and this relative depth;
+    ``min_consistent``: views that must confirm a point; ``seed``: random hypotheses."""
 
     scale: float | None = bounded(None, above=0.0, max=1.0)
     window: int = bounded(5, min=1, max=63)
@@ -254,8 +254,11 @@ def fuse(
             inside = om.intrinsics.in_image(uv)
             col = np.clip(np.nan_to_num(uv[:, 0]).astype(int), 0, om.intrinsics.width - 1)
             row = np.clip(np.nan_to_num(uv[:, 1]).astype(int), 0, om.intrinsics.height - 1)
-            d_o = om.distance[row, col]
-            r_o = om.intrinsics.pixel_rays(np.stack([col + 0.5, row + 0.5], 1))
+            # The other view's reading along the ray through the projection itself, not through
+            # the nearest pixel's centre: the check then measures depth disagreement alone, not
+            # where the point fell inside that pixel.
+            d_o = depth_at(om.distance, uv)
+            r_o = om.intrinsics.pixel_rays(np.nan_to_num(uv))
             back = poses[other].to_world(r_o * d_o[:, None])  # the other view's point
             reproj = project_point_error(back, poses[view], vd.intrinsics, rows, cols)
             dist = np.linalg.norm(x_o, axis=1)
@@ -276,6 +279,31 @@ def fuse(
     p = np.concatenate(points) if points else np.zeros((0, 3))
     n = np.concatenate(normals) if normals else np.zeros((0, 3))
     return p, n, {"patchmatch_pixels": total, "patchmatch_points": len(p)}
+
+
+def depth_at(distance: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """A depth map's bilinear reading at pixel coordinates ``uv`` (M, 2), over its finite taps
+    only (NaN where none is): a pixel beside a hole or a dropped pixel still reads its own depth.
+
+    >>> depth_at(np.array([[1.0, 3.0], [np.nan, 5.0]]), np.array([[1.0, 0.5], [1.0, 1.0]])).tolist()
+    [2.0, 3.0]
+    """
+    h, w = distance.shape
+    col = np.clip(np.nan_to_num(uv[:, 0]) - 0.5, 0.0, w - 1.0)
+    row = np.clip(np.nan_to_num(uv[:, 1]) - 0.5, 0.0, h - 1.0)
+    c0 = np.minimum(np.floor(col).astype(int), max(w - 2, 0))
+    r0 = np.minimum(np.floor(row).astype(int), max(h - 2, 0))
+    fc, fr = col - c0, row - r0
+    total = np.zeros(len(uv))
+    weight = np.zeros(len(uv))
+    for dr, dc, tap_weight in ((0, 0, (1 - fr) * (1 - fc)), (0, 1, (1 - fr) * fc),
+                               (1, 0, fr * (1 - fc)), (1, 1, fr * fc)):
+        value = distance[np.minimum(r0 + dr, h - 1), np.minimum(c0 + dc, w - 1)]
+        finite = np.isfinite(value)
+        total += np.where(finite, tap_weight * np.nan_to_num(value), 0.0)
+        weight += np.where(finite, tap_weight, 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(weight > 0, total / weight, np.nan)
 
 
 def project_point_error(

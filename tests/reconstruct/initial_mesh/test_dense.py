@@ -9,6 +9,7 @@ from reconstruct.initial_mesh.dense.poisson import largest_component, poisson_me
 from reconstruct.initial_mesh.dense.silhouette import fill_holes, silhouette
 from reconstruct.initial_mesh.dense.stereo import thin
 from reconstruct.initial_mesh.dense.visual_hull import carve, scene_box
+from reconstruct.initial_mesh.stage import MeshConfig
 from reconstruct.model.camera import Intrinsics, Pose
 
 
@@ -50,6 +51,26 @@ def test_carving_votes_forgive_one_wrong_silhouette() -> None:
     strict, _, _ = carve(masks, {k: intr for k in poses}, poses, lo, hi, 16, 3, votes=1)
     lenient, _, _ = carve(masks, {k: intr for k in poses}, poses, lo, hi, 16, 3, votes=2)
     assert lenient.all() and not strict[8, 8, 8]
+
+
+def test_the_default_vote_forgives_a_shadow_cutting_a_limb_in_two_views() -> None:
+    """A cast shadow as dark as the background can cut across a limb's outline in two
+    neighbouring views (ogre's legs under a point light); PatchMatch's default vote keeps the
+    limb."""
+    intr = Intrinsics.pinhole(64, 64, 80.0)
+    poses = {k: Pose.look_at(np.array([np.cos(a), np.sin(a), 0.3]), np.zeros(3))
+             for k, a in enumerate(np.linspace(0, 2 * np.pi, 8, endpoint=False))}
+    masks = {k: np.ones((64, 64), bool) for k in poses}
+    for view in (0, 1):
+        masks[view][:, 24:40] = False  # the shadow's band across the middle
+    lo, hi = np.full(3, -0.2), np.full(3, 0.2)
+    intrinsics = dict.fromkeys(poses, intr)
+    kept, _, _ = carve(masks, intrinsics, poses, lo, hi, 16, 3, MeshConfig().hull_votes())
+    cut, _, _ = carve(masks, intrinsics, poses, lo, hi, 16, 3, votes=2)
+    assert kept.all() and not cut[8, 8, 8]
+    # where the hull is the surface itself, a tighter hull is worth one view's slip only
+    assert MeshConfig(method="visual_hull").hull_votes() == 2
+    assert MeshConfig(carve_votes=4).hull_votes(hull_is_surface=True) == 4
 
 
 def test_poisson_keeps_the_largest_piece() -> None:

@@ -10,6 +10,7 @@ from scipy.ndimage import map_coordinates
 from reconstruct.initial_mesh.dense.patchmatch import (
     PatchMatchConfig,
     ViewDepth,
+    depth_at,
     fuse,
     patchmatch_points,
     patchmatch_view,
@@ -155,3 +156,54 @@ def test_fusion_averages_the_views_that_confirm_a_point(plane_scene: dict) -> No
     below = -points[:, 2]  # view 1's reading lies 2 mm * sin(elevation) below the plane
     assert np.percentile(below, 5) > 0.0006 and np.percentile(below, 95) < 0.0011
     assert np.median(normals[:, 2]) > 0.999
+
+
+def _exact_plane_maps(plane_scene: dict, views: tuple[int, ...]) -> dict[int, ViewDepth]:
+    """Depth maps that read the plane z = 0 exactly, at every pixel of each view."""
+    intr = plane_scene["intr"]
+    rr, cc = np.mgrid[0:HEIGHT, 0:WIDTH]
+    pixels = np.stack([cc.ravel() + 0.5, rr.ravel() + 0.5], 1)
+    maps = {}
+    for v in views:
+        pose = plane_scene["poses"][v]
+        rays = intr.pixel_rays(pixels) @ pose.R
+        distance = (-pose.center[2] / rays[:, 2]).reshape(HEIGHT, WIDTH)
+        normal = np.broadcast_to(pose.R @ np.array([0.0, 0.0, 1.0]), (HEIGHT, WIDTH, 3))
+        maps[v] = ViewDepth(distance, np.array(normal), np.zeros((HEIGHT, WIDTH)), intr)
+    return maps
+
+
+def test_exact_depths_confirm_each_other_wherever_the_point_falls_in_a_pixel(
+    plane_scene: dict,
+) -> None:
+    """The check reads the other view's depth where the point projects, not at the nearest
+    pixel's centre: two exact readings agree to a tenth of a pixel everywhere they overlap."""
+    poses = {v: plane_scene["poses"][v] for v in (0, 1)}
+    maps = _exact_plane_maps(plane_scene, (0, 1))
+    conf = PatchMatchConfig(min_consistent=1, consistency_px=0.1)
+    points, _, stats = fuse(maps, poses, {0: [1], 1: [0]}, conf)
+    seen_by_both = 0
+    for v, other in ((0, 1), (1, 0)):
+        rr, cc = np.mgrid[0:HEIGHT, 0:WIDTH]
+        rays = plane_scene["intr"].pixel_rays(np.stack([cc.ravel() + 0.5, rr.ravel() + 0.5], 1))
+        world = poses[v].to_world(rays * maps[v].distance.reshape(-1, 1))
+        uv = plane_scene["intr"].project_camera(poses[other].to_camera(world))
+        # a pixel's margin inside the border, where all four bilinear taps exist
+        seen_by_both += np.count_nonzero(
+            (uv[:, 0] > 1) & (uv[:, 0] < WIDTH - 1) & (uv[:, 1] > 1) & (uv[:, 1] < HEIGHT - 1))
+    assert stats["patchmatch_points"] >= seen_by_both > 0.3 * 2 * WIDTH * HEIGHT
+    # on the plane to a micrometre: a bilinear reading of distance along a ray is not exact
+    # on a plane, and the few points within half a pixel of the other view's border read it
+    # clamped
+    assert np.percentile(np.abs(points[:, 2]), 99) < 1e-6
+
+
+def test_depth_at_reads_between_pixel_centres() -> None:
+    import doctest
+
+    import reconstruct.initial_mesh.dense.patchmatch as module
+
+    assert doctest.testmod(module).failed == 0
+    distance = np.arange(12.0).reshape(3, 4)  # linear in rows and columns: bilinear is exact
+    uv = np.array([[0.5, 0.5], [1.25, 2.0], [3.5, 2.5], [2.0, 1.75]])
+    np.testing.assert_allclose(depth_at(distance, uv), [0.0, 6.75, 11.0, 6.5])
