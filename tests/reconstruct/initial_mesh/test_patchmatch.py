@@ -139,38 +139,32 @@ def test_shading_ramps_are_not_texture() -> None:
     assert texture_map(flat, np.ones((40, 40), bool), dr, dc)[20, 20] < 1e-6
 
 
-def test_fusion_averages_the_views_that_confirm_a_point(plane_scene: dict) -> None:
-    """Two views read the plane z = 0; view 1 reads it 2 mm too far along its rays. Each
-    fused point is the mean of both readings, so every point lies between the two."""
-    intr, poses = plane_scene["intr"], {v: plane_scene["poses"][v] for v in (0, 1)}
+def _plane_maps(plane_scene: dict, bias_m: dict[int, float]) -> dict[int, ViewDepth]:
+    """Depth maps of the plane z = 0 at every pixel of each view in ``bias_m``, read that much
+    too far along the rays."""
+    intr = plane_scene["intr"]
     rr, cc = np.mgrid[0:HEIGHT, 0:WIDTH]
     pixels = np.stack([cc.ravel() + 0.5, rr.ravel() + 0.5], 1)
     maps = {}
-    for v, bias in ((0, 0.0), (1, 0.002)):
-        rays = intr.pixel_rays(pixels) @ poses[v].R
-        distance = (-poses[v].center[2] / rays[:, 2] + bias).reshape(HEIGHT, WIDTH)
-        normal = np.broadcast_to(poses[v].R @ np.array([0.0, 0.0, 1.0]), (HEIGHT, WIDTH, 3))
+    for v, bias in bias_m.items():
+        pose = plane_scene["poses"][v]
+        rays = intr.pixel_rays(pixels) @ pose.R
+        distance = (-pose.center[2] / rays[:, 2] + bias).reshape(HEIGHT, WIDTH)
+        normal = np.broadcast_to(pose.R @ np.array([0.0, 0.0, 1.0]), (HEIGHT, WIDTH, 3))
         maps[v] = ViewDepth(distance, np.array(normal), np.zeros((HEIGHT, WIDTH)), intr)
+    return maps
+
+
+def test_fusion_averages_the_views_that_confirm_a_point(plane_scene: dict) -> None:
+    """Two views read the plane z = 0; view 1 reads it 2 mm too far along its rays. Each
+    fused point is the mean of both readings, so every point lies between the two."""
+    poses = {v: plane_scene["poses"][v] for v in (0, 1)}
+    maps = _plane_maps(plane_scene, {0: 0.0, 1: 0.002})
     points, normals, stats = fuse(maps, poses, {0: [1], 1: [0]}, PatchMatchConfig(min_consistent=1))
     assert stats["patchmatch_points"] > 0.3 * WIDTH * HEIGHT
     below = -points[:, 2]  # view 1's reading lies 2 mm * sin(elevation) below the plane
     assert np.percentile(below, 5) > 0.0006 and np.percentile(below, 95) < 0.0011
     assert np.median(normals[:, 2]) > 0.999
-
-
-def _exact_plane_maps(plane_scene: dict, views: tuple[int, ...]) -> dict[int, ViewDepth]:
-    """Depth maps that read the plane z = 0 exactly, at every pixel of each view."""
-    intr = plane_scene["intr"]
-    rr, cc = np.mgrid[0:HEIGHT, 0:WIDTH]
-    pixels = np.stack([cc.ravel() + 0.5, rr.ravel() + 0.5], 1)
-    maps = {}
-    for v in views:
-        pose = plane_scene["poses"][v]
-        rays = intr.pixel_rays(pixels) @ pose.R
-        distance = (-pose.center[2] / rays[:, 2]).reshape(HEIGHT, WIDTH)
-        normal = np.broadcast_to(pose.R @ np.array([0.0, 0.0, 1.0]), (HEIGHT, WIDTH, 3))
-        maps[v] = ViewDepth(distance, np.array(normal), np.zeros((HEIGHT, WIDTH)), intr)
-    return maps
 
 
 def test_exact_depths_confirm_each_other_wherever_the_point_falls_in_a_pixel(
@@ -179,7 +173,7 @@ def test_exact_depths_confirm_each_other_wherever_the_point_falls_in_a_pixel(
     """The check reads the other view's depth where the point projects, not at the nearest
     pixel's centre: two exact readings agree to a tenth of a pixel everywhere they overlap."""
     poses = {v: plane_scene["poses"][v] for v in (0, 1)}
-    maps = _exact_plane_maps(plane_scene, (0, 1))
+    maps = _plane_maps(plane_scene, {0: 0.0, 1: 0.0})
     conf = PatchMatchConfig(min_consistent=1, consistency_px=0.1)
     points, _, stats = fuse(maps, poses, {0: [1], 1: [0]}, conf)
     seen_by_both = 0
