@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from scipy.ndimage import map_coordinates
 
 from core.config import bounded
 from reconstruct.initial_mesh.dense.plane_cost import (
@@ -288,20 +289,11 @@ def depth_at(distance: np.ndarray, uv: np.ndarray) -> np.ndarray:
     >>> depth_at(np.array([[1.0, 3.0], [np.nan, 5.0]]), np.array([[1.0, 0.5], [1.0, 1.0]])).tolist()
     [2.0, 3.0]
     """
-    h, w = distance.shape
-    col = np.clip(np.nan_to_num(uv[:, 0]) - 0.5, 0.0, w - 1.0)
-    row = np.clip(np.nan_to_num(uv[:, 1]) - 0.5, 0.0, h - 1.0)
-    c0 = np.minimum(np.floor(col).astype(int), max(w - 2, 0))
-    r0 = np.minimum(np.floor(row).astype(int), max(h - 2, 0))
-    fc, fr = col - c0, row - r0
-    total = np.zeros(len(uv))
-    weight = np.zeros(len(uv))
-    for dr, dc, tap_weight in ((0, 0, (1 - fr) * (1 - fc)), (0, 1, (1 - fr) * fc),
-                               (1, 0, fr * (1 - fc)), (1, 1, fr * fc)):
-        value = distance[np.minimum(r0 + dr, h - 1), np.minimum(c0 + dc, w - 1)]
-        finite = np.isfinite(value)
-        total += np.where(finite, tap_weight * np.nan_to_num(value), 0.0)
-        weight += np.where(finite, tap_weight, 0.0)
+    # normalised convolution: the bilinear weights of the finite taps alone
+    coords = [np.nan_to_num(uv[:, 1]) - 0.5, np.nan_to_num(uv[:, 0]) - 0.5]
+    finite = np.isfinite(distance)
+    total = map_coordinates(np.where(finite, distance, 0.0), coords, order=1, mode="nearest")
+    weight = map_coordinates(finite.astype(float), coords, order=1, mode="nearest")
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(weight > 0, total / weight, np.nan)
 

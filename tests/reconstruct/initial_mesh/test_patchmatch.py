@@ -176,10 +176,10 @@ def test_exact_depths_confirm_each_other_wherever_the_point_falls_in_a_pixel(
     maps = _plane_maps(plane_scene, {0: 0.0, 1: 0.0})
     conf = PatchMatchConfig(min_consistent=1, consistency_px=0.1)
     points, _, stats = fuse(maps, poses, {0: [1], 1: [0]}, conf)
+    rr, cc = np.mgrid[0:HEIGHT, 0:WIDTH]
+    rays = plane_scene["intr"].pixel_rays(np.stack([cc.ravel() + 0.5, rr.ravel() + 0.5], 1))
     seen_by_both = 0
     for v, other in ((0, 1), (1, 0)):
-        rr, cc = np.mgrid[0:HEIGHT, 0:WIDTH]
-        rays = plane_scene["intr"].pixel_rays(np.stack([cc.ravel() + 0.5, rr.ravel() + 0.5], 1))
         world = poses[v].to_world(rays * maps[v].distance.reshape(-1, 1))
         uv = plane_scene["intr"].project_camera(poses[other].to_camera(world))
         # a pixel's margin inside the border, where all four bilinear taps exist
