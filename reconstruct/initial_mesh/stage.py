@@ -32,9 +32,11 @@ from core.errors import RigError
 from core.files import write_bytes_atomically
 from reconstruct.frames.decode import INDEX, DecodeIndex, load_frame
 from reconstruct.initial_mesh.dense.board_silhouette import board_silhouette
+from reconstruct.initial_mesh.dense.mirror import without_near_mirror
 from reconstruct.initial_mesh.dense.patchmatch import (
     DenseResult,
     PatchMatchConfig,
+    fuse,
     patchmatch_points,
 )
 from reconstruct.initial_mesh.dense.poisson import poisson_mesh, read_mesh
@@ -200,8 +202,16 @@ def brightest(grey: np.ndarray) -> np.ndarray:
 
 
 def dense_mesh(
-    decoded_dir: Path, poses_dir: Path, conf: MeshConfig, out_dir: Path, posed: PoseSet
+    decoded_dir: Path,
+    poses_dir: Path,
+    conf: MeshConfig,
+    out_dir: Path,
+    posed: PoseSet,
+    light_offset: np.ndarray | None = None,
 ) -> tuple[trimesh.Trimesh, dict[str, Any]]:
+    """The initial mesh from the decoded frames and poses, and what built it. ``light_offset``:
+    the lamp's position in the camera frame (metres), which lets PatchMatch leave highlights
+    out of its fusion (None: unknown, every pixel is fused)."""
     intrinsics, poses, _ = posed
     board = conf.board_spec()
     dilate_px = conf.mask_dilate_px
@@ -252,16 +262,51 @@ def dense_mesh(
             np.asarray(mesh.vertices), np.asarray(mesh.faces), grey, masks, intrinsics, poses,
             conf.patchmatch,
         )
-        pm, pn = dense.points, dense.normals
-        if floor is not None:  # the masks include the object's shadow on the board
-            above = pm[:, 2] > floor + voxel / 2
-            pm, pn = pm[above], pn[above]
-        pm, pn = thin(pm, pn, voxel / 4)
-        info |= dense.stats
-        if len(pm) < MIN_STEREO_POINTS:
+
+        def stereo_surface(dense: DenseResult) -> tuple[trimesh.Trimesh | None, dict[str, Any]]:
+            """Poisson's surface of the fused points (None: too few to carry one)."""
+            pm, pn = dense.points, dense.normals
+            if floor is not None:  # the masks include the object's shadow on the board
+                above = pm[:, 2] > floor + voxel / 2
+                pm, pn = pm[above], pn[above]
+            pm, pn = thin(pm, pn, voxel / 4)
+            if len(pm) < MIN_STEREO_POINTS:
+                return None, dense.stats | {"stereo_points": len(pm)}
+            hp, hn = pm[:0], pn[:0]
+            if conf.fill_unseen_from_hull:
+                hp, hn = unseen_hull_points(hull_mesh, points, normals, pm, dense, poses,
+                                            2 * voxel, conf.patchmatch.cost_max)
+            depth = conf.patchmatch.poisson_depth
+            surface = poisson_mesh(np.vstack([pm, hp]), np.vstack([pn, hn]), depth,
+                                   conf.patchmatch.poisson_trim, conf.num_threads)
+            moved = clip_to_hull(surface, hull_mesh, pm, voxel, masks, intrinsics, poses, votes)
+            return surface, dense.stats | {
+                "method": "visual_hull_bounded_patchmatch+poisson", "poisson_depth": depth,
+                "hull_points_kept": len(hp), "vertices_clipped_to_hull": moved}
+
+        surface, stereo_info = stereo_surface(dense)
+        if surface is not None and conf.patchmatch.mirror_deg > 0 and light_offset is not None:
+            # fuse again without the pixels this first surface says saw a highlight
+            maps, dropped = without_near_mirror(
+                dense.maps, poses, light_offset,
+                RayCaster(np.asarray(surface.vertices), np.asarray(surface.faces)),
+                conf.patchmatch.mirror_deg,
+            )
+            log.info("PatchMatch: %d pixels look near the mirror direction; fusing without them",
+                     dropped)
+            fused, fused_normals, stats = fuse(maps, poses, dense.sources, conf.patchmatch)
+            second, second_info = stereo_surface(
+                DenseResult(fused, fused_normals, stats | {"near_mirror_pixels": dropped},
+                            maps, dense.sources))
+            if second is not None:
+                surface, stereo_info = second, second_info
+        info |= stereo_info
+        if surface is not None:
+            mesh = surface
+        else:
             log.warning(
                 "PatchMatch matched only %d points (the object shows too little texture at this "
-                "image size); the initial mesh is the visual hull", len(pm),
+                "image size); the initial mesh is the visual hull", stereo_info["stereo_points"],
             )
             info["method"] = "visual_hull+poisson (patchmatch matched too few points)"
             surface_votes = conf.hull_votes(hull_is_surface=True)
@@ -271,18 +316,6 @@ def dense_mesh(
                 kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * dilate_px + 1,) * 2)
                 mesh = hull({v: cv2.erode(m.astype(np.uint8), kernel) > 0
                              for v, m in masks.items()}, surface_votes)[0]
-        else:
-            hp, hn = pm[:0], pn[:0]
-            if conf.fill_unseen_from_hull:
-                hp, hn = unseen_hull_points(mesh, points, normals, pm, dense, poses, 2 * voxel,
-                                            conf.patchmatch.cost_max)
-            depth = conf.patchmatch.poisson_depth
-            mesh = poisson_mesh(np.vstack([pm, hp]), np.vstack([pn, hn]), depth,
-                                conf.patchmatch.poisson_trim, conf.num_threads)
-            moved = clip_to_hull(mesh, hull_mesh, pm, voxel, masks, intrinsics, poses, votes)
-            info |= {"method": "visual_hull_bounded_patchmatch+poisson",
-                     "poisson_depth": depth, "hull_points_kept": len(hp),
-                     "vertices_clipped_to_hull": moved}
     if floor is not None:  # the object stands on the board: nothing of it lies below
         vertices = np.array(mesh.vertices)
         vertices[:, 2] = np.maximum(vertices[:, 2], 0.0)
@@ -368,6 +401,7 @@ def _initial(
     out_dir: Path,
     user: Path | None,
     posed: PoseSet | None,
+    light_offset: np.ndarray | None,
 ) -> None:
     info: dict[str, Any]
     if user is not None:
@@ -379,7 +413,7 @@ def _initial(
         info = {"method": "given", "source": str(user), "repair": repaired}
     else:
         posed = posed or load_poses(poses_dir)
-        mesh, info = dense_mesh(decoded_dir, poses_dir, conf, out_dir, posed)
+        mesh, info = dense_mesh(decoded_dir, poses_dir, conf, out_dir, posed, light_offset)
     if info["repair"]["actions"]:
         log.warning("initial mesh repaired: %s", "; ".join(info["repair"]["actions"]))
     mesh.export(out_dir / MESH)
@@ -397,9 +431,11 @@ def run(
     out_dir: Path,
     initial_mesh: Path | None = None,
     posed: PoseSet | None = None,
+    light_offset: np.ndarray | None = None,
 ) -> Path:
     """Write ``out_dir/initial.ply`` (resumable); returns its path. ``posed``: the poses
-    stage's output when the caller has loaded it."""
+    stage's output when the caller has loaded it; ``light_offset``: the lamp in the camera
+    frame (metres; None: unknown), as :func:`dense_mesh` takes it."""
     conf = conf if isinstance(conf, MeshConfig) else mesh_config(conf)
     inputs = [decoded_dir / INDEX, poses_dir / "images.txt", poses_dir / "cameras.txt"]
     if initial_mesh is not None:
@@ -407,7 +443,11 @@ def run(
     if out_dir.exists() and not (out_dir / ".stamp.json").exists():
         shutil.rmtree(out_dir)
     run_stage(
-        "initial_mesh", asdict(conf) | {"given": str(initial_mesh)}, inputs, out_dir,
-        lambda: _initial(decoded_dir, poses_dir, conf, out_dir, initial_mesh, posed),
+        "initial_mesh",
+        asdict(conf) | {"given": str(initial_mesh),
+                        "light_offset": None if light_offset is None else list(light_offset)},
+        inputs, out_dir,
+        lambda: _initial(decoded_dir, poses_dir, conf, out_dir, initial_mesh, posed,
+                         light_offset),
     )
     return out_dir / MESH

@@ -39,18 +39,6 @@ def group_median(group: np.ndarray, values: np.ndarray, n_groups: int) -> np.nda
     return out
 
 
-def half_angles(
-    points: np.ndarray, normals: np.ndarray, lights: np.ndarray, cameras: np.ndarray
-) -> np.ndarray:
-    """Angle (radians) between each normal and the half-vector of the directions to the light
-    and to the camera centre (all (M, 3)): 0 where the camera sees the light's mirror image."""
-    to_light, to_cam = lights - points, cameras - points
-    half = to_light / np.linalg.norm(to_light, axis=1, keepdims=True)
-    half += to_cam / np.linalg.norm(to_cam, axis=1, keepdims=True)
-    cos = np.einsum("ij,ij->i", normals, half) / np.linalg.norm(half, axis=1)
-    return np.arccos(np.clip(cos, -1.0, 1.0))
-
-
 def neutral_excess(
     pair: np.ndarray,
     vertex: np.ndarray,

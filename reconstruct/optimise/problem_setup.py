@@ -20,10 +20,10 @@ from calibration.estimation import estimate_reflectance
 from calibration.prior import spectral_regulariser
 from core.errors import RigError
 from reconstruct.model.bulb import rim_points
-from reconstruct.model.forward import shading
+from reconstruct.model.forward import half_angles, shading
 from reconstruct.model.raycast import RayCaster
 from reconstruct.optimise.cost import JointCost
-from reconstruct.optimise.highlights import half_angles, highlight_weights
+from reconstruct.optimise.highlights import highlight_weights
 from reconstruct.optimise.mesh import adjacency, edges, vertex_normals
 from reconstruct.optimise.problem import LightMode, Observations, Problem, Rig, Weights
 from reconstruct.optimise.sampling import sample_pairs, taps_valid

@@ -202,6 +202,8 @@ def run_front(
                     _patchmatch_scale(_mesh_config(conf.mesh, session, posed.summary), levels),
                     dirs["decoded"],
                     dirs["poses"], dirs["mesh"], initial_mesh_file, posed,
+                    # the paper's start where the profile names no mount: the lamp at the lens
+                    np.asarray(session.info.light_offset_m or (0.0, 0.0, 0.0), dtype=float),
                 )
             progress.update(task, advance=1, description="reconstruct: visibility")
             vis0 = visibility.run(

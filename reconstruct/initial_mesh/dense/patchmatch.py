@@ -56,7 +56,9 @@ class PatchMatchConfig:
     1 - NCC above which a pixel is dropped; ``consistency_px`` / ``consistency_depth``: a point
     is confirmed by another view when that view's depth, read where the point projects, puts
     it back within this many pixels of its own pixel and this relative depth;
-    ``min_consistent``: views that must confirm a point; ``seed``: random hypotheses."""
+    ``min_consistent``: views that must confirm a point; ``mirror_deg``: pixels whose surface
+    normal lies within this angle of the mirror direction of the lamp are fused again without
+    (:mod:`reconstruct.initial_mesh.dense.mirror`; 0: never); ``seed``: random hypotheses."""
 
     scale: float | None = bounded(None, above=0.0, max=1.0)
     window: int = bounded(5, min=1, max=63)
@@ -72,6 +74,7 @@ class PatchMatchConfig:
     consistency_px: float = bounded(0.5, min=0.0, max=1000.0)
     consistency_depth: float = bounded(0.005, min=0.0, max=1.0)
     min_consistent: int = bounded(2, min=1, max=64)
+    mirror_deg: float = bounded(20.0, min=0.0, max=90.0)
     # planes seen more obliquely than this are not proposed
     max_normal_deg: float = bounded(80.0, above=0.0, max=90.0)
     poisson_depth: int = bounded(9, min=1, max=14)
@@ -98,12 +101,14 @@ class ViewDepth:
 
 @dataclass
 class DenseResult:
-    """Fused oriented points, counts, and every view's depth map (what it saw as surface)."""
+    """Fused oriented points, counts, every view's depth map (what it saw as surface) and the
+    views it was matched against and confirmed by."""
 
     points: np.ndarray
     normals: np.ndarray
     stats: dict[str, int]
     maps: dict[int, ViewDepth]
+    sources: dict[int, list[int]]
 
 
 def scaled(intr: Intrinsics, scale: float) -> Intrinsics:
@@ -336,7 +341,7 @@ def patchmatch_points(
         if progress is not None:
             progress(i + 1, len(views))
     points, normals, stats = fuse(maps, poses, srcs, conf)
-    return DenseResult(points, normals, stats, maps)
+    return DenseResult(points, normals, stats, maps, srcs)
 
 
 def undistorted(

@@ -173,3 +173,12 @@ def test_missing_embree_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> Non
     monkeypatch.setattr(trimesh.ray, "has_embree", False)
     with pytest.raises(RigError, match="embreex"):
         RayCaster(*plane(1.0))
+
+
+def test_half_angles() -> None:
+    points = np.zeros((3, 3))
+    normals = np.array([[0.0, 0.0, 1.0]] * 3)
+    lights = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [1.0, 0.0, 1.0]])
+    cameras = np.array([[0.0, 0.0, 2.0], [-1.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    got = np.degrees(forward.half_angles(points, normals, lights, cameras))
+    assert np.allclose(got, [0.0, 0.0, 22.5])

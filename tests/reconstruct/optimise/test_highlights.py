@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from calibration.defaults import training_reflectances
-from reconstruct.optimise.highlights import group_median, half_angles, highlight_weights
+from reconstruct.optimise.highlights import group_median, highlight_weights
 from reconstruct.optimise.settings import OptimiseSettings
 from reconstruct.optimise.steps import optimise
 from reconstruct.optimise.synthetic import SyntheticScene, default_responses, with_gloss
@@ -94,15 +94,6 @@ def test_far_from_the_mirror_direction_an_excess_is_left_to_the_shading() -> Non
     observed[glossy] += 0.03 * shading[glossy, None] * WHITE[ill[glossy]]
     assert np.all(weights(pair, vertex, ill, observed, shading, 2, 0.0)[glossy] < 0.1)
     assert np.all(weights(pair, vertex, ill, observed, shading, 2, 60.0)[glossy] > 0.9)
-
-
-def test_half_angles() -> None:
-    points = np.zeros((3, 3))
-    normals = np.array([[0.0, 0.0, 1.0]] * 3)
-    lights = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [1.0, 0.0, 1.0]])
-    cameras = np.array([[0.0, 0.0, 2.0], [-1.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
-    got = np.degrees(half_angles(points, normals, lights, cameras))
-    assert np.allclose(got, [0.0, 0.0, 22.5])
 
 
 def test_a_dark_surface_is_judged_against_the_noise() -> None:

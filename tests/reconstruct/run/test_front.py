@@ -136,3 +136,7 @@ def test_patchmatch_recovers_a_concavity_the_hull_cannot(tmp_path: Path) -> None
           f"{errors['patchmatch'] * 1e3:.2f} mm (PatchMatch)")
     assert errors["visual_hull"] > 0.003  # the hull bridges the dent
     assert errors["patchmatch"] < 0.5 * errors["visual_hull"]
+    # fused a second time without the pixels that saw the lamp (at the lens) mirrored
+    info = json.loads((result.recon_dir / "mesh" / "initial.json").read_text())
+    assert info["near_mirror_pixels"] > 0
+    assert info["patchmatch_points"] < info["patchmatch_pixels"]

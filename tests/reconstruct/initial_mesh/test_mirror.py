@@ -1,0 +1,70 @@
+"""Depth-map pixels near the lamp's mirror direction, found from a surface and dropped."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from reconstruct.initial_mesh.dense.mirror import without_near_mirror
+from reconstruct.initial_mesh.dense.patchmatch import ViewDepth
+from reconstruct.model.camera import Intrinsics, Pose
+from reconstruct.model.raycast import RayCaster
+
+RADIUS = 0.1
+
+
+@pytest.fixture(scope="module")
+def sphere_view() -> tuple[ViewDepth, Pose, RayCaster]:
+    """A sphere seen from 0.5 m with every pixel's true depth (NaN off the sphere)."""
+    sphere = trimesh.creation.icosphere(subdivisions=5, radius=RADIUS)
+    caster = RayCaster(np.asarray(sphere.vertices), np.asarray(sphere.faces))
+    intr = Intrinsics.pinhole(120, 120, 300.0)
+    pose = Pose.look_at(np.array([0.0, 0.0, 0.5]), np.zeros(3))
+    rr, cc = np.mgrid[0:120, 0:120]
+    rays = intr.pixel_rays(np.stack([cc.ravel() + 0.5, rr.ravel() + 0.5], 1)) @ pose.R
+    _, distance, _ = caster.first_hit(np.broadcast_to(pose.center, rays.shape), rays)
+    depth = np.where(np.isfinite(distance), distance, np.nan).reshape(120, 120)
+    return ViewDepth(depth, np.zeros((120, 120, 3)), np.zeros((120, 120)), intr), pose, caster
+
+
+def _sphere_half_angles(vd: ViewDepth, pose: Pose, light: np.ndarray) -> np.ndarray:
+    """Each pixel's half-angle (degrees) from the sphere's exact normals (NaN off it)."""
+    rr, cc = np.mgrid[0:120, 0:120]
+    rays = vd.intrinsics.pixel_rays(np.stack([cc.ravel() + 0.5, rr.ravel() + 0.5], 1)) @ pose.R
+    x = pose.center + rays * vd.distance.reshape(-1, 1)
+    normal = x / RADIUS
+    half = (light - x) / np.linalg.norm(light - x, axis=1, keepdims=True)
+    half += (pose.center - x) / np.linalg.norm(pose.center - x, axis=1, keepdims=True)
+    half /= np.linalg.norm(half, axis=1, keepdims=True)
+    return np.degrees(np.arccos(np.clip(np.sum(normal * half, axis=1), -1, 1))).reshape(120, 120)
+
+
+def test_pixels_within_the_angle_of_the_mirror_direction_are_dropped(sphere_view) -> None:
+    vd, pose, caster = sphere_view
+    offset = np.array([0.1, 0.0, 0.0])  # the lamp 10 cm beside the lens
+    maps, dropped = without_near_mirror({0: vd}, {0: pose}, offset, caster, 20.0)
+    kept = np.isfinite(maps[0].distance)
+    angle = _sphere_half_angles(vd, pose, pose.light_position(offset))
+    on_sphere = np.isfinite(vd.distance)
+    assert dropped == int((on_sphere & ~kept).sum()) > 50
+    # the faceted sphere's normals differ from the exact ones by under a degree
+    assert np.all(~kept[on_sphere & (angle < 19.0)])
+    assert np.all(kept[on_sphere & (angle > 21.0)])
+    assert np.array_equal(maps[0].distance[kept], vd.distance[kept])  # the rest untouched
+    assert np.isfinite(vd.distance).sum() == on_sphere.sum()  # the input map is not changed
+    # the highlight sits between the lens and the lamp, not at the image centre
+    cols = np.nonzero(~kept & on_sphere)[1]
+    assert abs(cols.mean() + 0.5 - vd.intrinsics.K[0, 2]) > 3
+
+
+def test_nothing_is_dropped_at_zero_degrees_or_where_rays_miss_the_surface(sphere_view) -> None:
+    vd, pose, caster = sphere_view
+    maps, dropped = without_near_mirror({0: vd}, {0: pose}, np.zeros(3), caster, 0.0)
+    assert dropped == 0
+    assert np.array_equal(np.isfinite(maps[0].distance), np.isfinite(vd.distance))
+    far = trimesh.creation.box(extents=(0.05, 0.05, 0.05))
+    far.apply_translation([1.0, 0.0, 0.0])  # out of the view: every ray misses it
+    off = RayCaster(np.asarray(far.vertices), np.asarray(far.faces))
+    maps, dropped = without_near_mirror({0: vd}, {0: pose}, np.zeros(3), off, 45.0)
+    assert dropped == 0
