@@ -285,7 +285,7 @@ def dense_mesh(
                 "hull_points_kept": len(hp), "vertices_clipped_to_hull": moved}
 
         surface, stereo_info = stereo_surface(dense)
-        if surface is not None and conf.patchmatch.mirror_deg > 0 and light_offset is not None:
+        if surface is not None and conf.patchmatch.mirror_deg and light_offset is not None:
             # fuse again without the pixels this first surface says saw a highlight
             maps, dropped = without_near_mirror(
                 dense.maps, poses, light_offset,

@@ -30,6 +30,7 @@ from reconstruct.geometry import subdivide, visibility
 from reconstruct.geometry.subdivide import SubdivideConfig
 from reconstruct.geometry.visibility import Visibility, VisibilityConfig
 from reconstruct.initial_mesh import stage as initial_mesh
+from reconstruct.initial_mesh.dense.mirror import GLOSSY_MIRROR_DEG
 from reconstruct.initial_mesh.dense.poisson import read_mesh
 from reconstruct.initial_mesh.procam import (
     LIGHTS,
@@ -162,13 +163,25 @@ def _patchmatch_scale(conf: MeshConfig, levels: StageLevels) -> MeshConfig:
     return replace(conf, patchmatch=replace(conf.patchmatch, scale=levels.patchmatch_scale))
 
 
+def _mirror(conf: MeshConfig, glossy: bool) -> MeshConfig:
+    """Highlights left out of fusion on an object declared glossy, unless the config names
+    the angle."""
+    if conf.patchmatch.mirror_deg is not None:
+        return conf
+    angle = GLOSSY_MIRROR_DEG if glossy else 0.0
+    return replace(conf, patchmatch=replace(conf.patchmatch, mirror_deg=angle))
+
+
 def run_front(
     session: Session | Path,
     conf: FrontConfig | Mapping[str, Any] | None = None,
     initial_mesh_file: Path | None = None,
+    glossy: bool = False,
 ) -> FrontResult:
     """Run (or resume) the five stages on a session (opened by the caller, or its folder).
-    The session is opened and the poses are loaded once here and handed to each stage."""
+    The session is opened and the poses are loaded once here and handed to each stage.
+    ``glossy``: the optimiser models gloss (``optimise.gloss`` or ``highlights``), so the
+    initial mesh leaves highlights out too."""
     conf = conf if isinstance(conf, FrontConfig) else FrontConfig.from_mapping(conf or {})
     session = Session.of(session)
     session_dir = session.root
@@ -198,8 +211,9 @@ def run_front(
                     decoded_dir=dirs["decoded"],
                 )
             else:
+                mesh_conf = _mesh_config(conf.mesh, session, posed.summary)
                 mesh0 = initial_mesh.run(
-                    _patchmatch_scale(_mesh_config(conf.mesh, session, posed.summary), levels),
+                    _mirror(_patchmatch_scale(mesh_conf, levels), glossy),
                     dirs["decoded"],
                     dirs["poses"], dirs["mesh"], initial_mesh_file, posed,
                     # the paper's start where the profile names no mount: the lamp at the lens

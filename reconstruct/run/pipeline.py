@@ -525,7 +525,8 @@ def _run(
     t0 = time.perf_counter()
     status.stage("front")
     front = run_front(
-        session, {k: v for k, v in conf.items() if k in FRONT_SECTIONS}, initial_mesh
+        session, {k: v for k, v in conf.items() if k in FRONT_SECTIONS}, initial_mesh,
+        glossy=settings.gloss != "none" or settings.highlights,
     )
     t_front = time.perf_counter() - t0
     t0 = time.perf_counter()

@@ -13,6 +13,7 @@ import yaml
 from core.files import sha256_file
 from core.manifest import FrameRecord, append_manifest
 from reconstruct.model.camera import Intrinsics, Pose, write_colmap_text
+from reconstruct.model.forward import ggx_lobe
 from reconstruct.model.raycast import RayCaster
 
 RADIUS = 0.1
@@ -30,8 +31,11 @@ def ring_poses(n: int, distance: float = 0.5) -> list[Pose]:
     return out
 
 
-def render(mesh: trimesh.Trimesh, intr: Intrinsics, pose: Pose, gain: np.ndarray) -> np.ndarray:
-    """Normalised linear RGB (light at the camera, inverse square, a checker texture)."""
+def render(
+    mesh: trimesh.Trimesh, intr: Intrinsics, pose: Pose, gain: np.ndarray, gloss: float = 0.0
+) -> np.ndarray:
+    """Normalised linear RGB (light at the camera, inverse square, a checker texture), with a
+    neutral GGX lobe (alpha 0.2) of reflectance ``gloss`` at normal incidence."""
     caster = RayCaster(mesh.vertices, mesh.faces)
     cols, rows = np.meshgrid(np.arange(intr.width) + 0.5, np.arange(intr.height) + 0.5)
     uv = np.stack([cols.ravel(), rows.ravel()], axis=1)
@@ -45,8 +49,10 @@ def render(mesh: trimesh.Trimesh, intr: Intrinsics, pose: Pose, gain: np.ndarray
     theta = np.arctan2(x[:, 1], x[:, 0])
     phi = np.arccos(np.clip(x[:, 2] / np.linalg.norm(x, axis=1), -1, 1))
     albedo = 0.35 + 0.3 * ((np.floor(theta * 12) + np.floor(phi * 12)) % 2)
+    to_eye = -dirs[hit]
+    lobe = ggx_lobe(n, to_eye, to_eye, 0.2, gloss) if gloss else np.zeros(len(x))
     img = np.zeros((len(uv), 3))
-    img[hit] = (shade * albedo)[:, None] * gain
+    img[hit] = (shade * albedo + lobe / dist[hit] ** 2 * 0.08)[:, None] * gain
     return img.reshape(intr.height, intr.width, 3).astype(np.float32)
 
 
@@ -69,8 +75,10 @@ def build_session(
     size: tuple[int, int] = (160, 120),
     extra_yaml: dict | None = None,
     mesh: trimesh.Trimesh | None = None,
+    gloss: float = 0.0,
 ) -> Path:
-    """Write a session under ``tmp_path/session`` and return its directory."""
+    """Write a session under ``tmp_path/session`` and return its directory (``gloss``: the
+    object's specular reflectance at normal incidence, 0 for none)."""
     root = tmp_path / "session"
     (root / "raw").mkdir(parents=True)
     intr = Intrinsics.pinhole(size[0], size[1], 1.6 * size[0])
@@ -84,7 +92,7 @@ def build_session(
     frame = 0
     for view, pose in enumerate(poses):
         for name in illuminations:
-            img = render(mesh, intr, pose, gains.get(name, np.ones(3)))
+            img = render(mesh, intr, pose, gains.get(name, np.ones(3)), gloss)
             rel = f"raw/v{view:03d}_{name}.npy"
             np.save(root / rel, img)
             append_manifest(root, FrameRecord(

@@ -7,8 +7,9 @@ puts such pixels millimetres off, and neighbouring views' wrong depths can confi
 Which pixels those are follows from the geometry alone: a first surface from all the fused
 points (whose normals are right even where a blob displaces it) gives each pixel's normal,
 and pixels within ``max_deg`` of the mirror direction are dropped before fusing again. The
-views that see the same surface obliquely keep it. On a matte surface this costs only
-redundant, head-on depths.
+views that see the same surface obliquely keep it. Concavities are seen head-on, though,
+and with few views the head-on depths are much of what fusion confirms, so the pass runs by
+default only for objects declared glossy.
 """
 
 from __future__ import annotations
@@ -22,6 +23,10 @@ from reconstruct.initial_mesh.dense.patchmatch import ViewDepth
 from reconstruct.model.camera import Pose
 from reconstruct.model.forward import half_angles
 from reconstruct.model.raycast import RayCaster
+
+# the angle a glossy object's pixels are left out within (GGX α 0.2: the lobe is down to about
+# a fifteenth of its peak there)
+GLOSSY_MIRROR_DEG = 20.0
 
 
 def without_near_mirror(

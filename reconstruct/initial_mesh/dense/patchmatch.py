@@ -57,8 +57,9 @@ class PatchMatchConfig:
     is confirmed by another view when that view's depth, read where the point projects, puts
     it back within this many pixels of its own pixel and this relative depth;
     ``min_consistent``: views that must confirm a point; ``mirror_deg``: pixels whose surface
-    normal lies within this angle of the mirror direction of the lamp are fused again without
-    (:mod:`reconstruct.initial_mesh.dense.mirror`; 0: never); ``seed``: random hypotheses."""
+    normal lies within this angle of the lamp's mirror direction are left out of a second
+    fusion (:mod:`reconstruct.initial_mesh.dense.mirror`; 0: fuse once; unset: 20 when the
+    optimiser is told the object is glossy, else 0); ``seed``: random hypotheses."""
 
     scale: float | None = bounded(None, above=0.0, max=1.0)
     window: int = bounded(5, min=1, max=63)
@@ -74,7 +75,7 @@ class PatchMatchConfig:
     consistency_px: float = bounded(0.5, min=0.0, max=1000.0)
     consistency_depth: float = bounded(0.005, min=0.0, max=1.0)
     min_consistent: int = bounded(2, min=1, max=64)
-    mirror_deg: float = bounded(20.0, min=0.0, max=90.0)
+    mirror_deg: float | None = bounded(None, min=0.0, max=90.0)
     # planes seen more obliquely than this are not proposed
     max_normal_deg: float = bounded(80.0, above=0.0, max=90.0)
     poisson_depth: int = bounded(9, min=1, max=14)
