@@ -149,3 +149,25 @@ def test_patchmatch_recovers_a_concavity_the_hull_cannot(tmp_path: Path) -> None
     distance = np.abs(trimesh.proximity.signed_distance(truth, points))
     print(f"glossy, highlights left out: {distance[points[:, 0] > 0.06].mean() * 1e3:.2f} mm")
     assert distance[points[:, 0] > 0.06].mean() < 0.5 * errors["visual_hull"]
+
+
+@pytest.mark.parametrize(
+    ("optimise", "glossy"),
+    [({}, False), ({"gloss": "fit"}, True), ({"highlights": True}, True)],
+)
+def test_the_pipeline_tells_the_front_end_when_the_object_is_glossy(
+    make_session: Callable[..., Path], monkeypatch: pytest.MonkeyPatch, optimise: dict,
+    glossy: bool,
+) -> None:
+    from reconstruct.run import pipeline
+
+    seen = {}
+
+    def front(*args: object, **kwargs: object) -> None:
+        seen.update(kwargs)
+        raise RigError("stopped after the front end's call", "")
+
+    monkeypatch.setattr(pipeline, "run_front", front)
+    with pytest.raises(RigError, match="stopped after"):
+        pipeline.run_reconstruction(make_session(views=3), {"optimise": optimise})
+    assert seen["glossy"] is glossy
