@@ -263,24 +263,24 @@ def dense_mesh(
             conf.patchmatch,
         )
 
-        def stereo_surface(dense: DenseResult) -> tuple[trimesh.Trimesh | None, dict[str, Any]]:
+        def stereo_surface(fused: DenseResult) -> tuple[trimesh.Trimesh | None, dict[str, Any]]:
             """Poisson's surface of the fused points (None: too few to carry one)."""
-            pm, pn = dense.points, dense.normals
+            pm, pn = fused.points, fused.normals
             if floor is not None:  # the masks include the object's shadow on the board
                 above = pm[:, 2] > floor + voxel / 2
                 pm, pn = pm[above], pn[above]
             pm, pn = thin(pm, pn, voxel / 4)
             if len(pm) < MIN_STEREO_POINTS:
-                return None, dense.stats | {"stereo_points": len(pm)}
+                return None, fused.stats | {"stereo_points": len(pm)}
             hp, hn = pm[:0], pn[:0]
             if conf.fill_unseen_from_hull:
-                hp, hn = unseen_hull_points(hull_mesh, points, normals, pm, dense, poses,
+                hp, hn = unseen_hull_points(hull_mesh, points, normals, pm, fused, poses,
                                             2 * voxel, conf.patchmatch.cost_max)
             depth = conf.patchmatch.poisson_depth
             surface = poisson_mesh(np.vstack([pm, hp]), np.vstack([pn, hn]), depth,
                                    conf.patchmatch.poisson_trim, conf.num_threads)
             moved = clip_to_hull(surface, hull_mesh, pm, voxel, masks, intrinsics, poses, votes)
-            return surface, dense.stats | {
+            return surface, fused.stats | {
                 "method": "visual_hull_bounded_patchmatch+poisson", "poisson_depth": depth,
                 "hull_points_kept": len(hp), "vertices_clipped_to_hull": moved}
 
@@ -288,15 +288,13 @@ def dense_mesh(
         if surface is not None and conf.patchmatch.mirror_deg and light_offset is not None:
             # fuse again without the pixels this first surface says saw a highlight
             maps, dropped = without_near_mirror(
-                dense.maps, poses, light_offset,
-                RayCaster(np.asarray(surface.vertices), np.asarray(surface.faces)),
-                conf.patchmatch.mirror_deg,
+                dense.maps, poses, light_offset, surface, conf.patchmatch.mirror_deg
             )
             log.info("PatchMatch: %d pixels look near the mirror direction; fusing without them",
                      dropped)
-            fused, fused_normals, stats = fuse(maps, poses, dense.sources, conf.patchmatch)
+            kept_points, kept_normals, stats = fuse(maps, poses, dense.sources, conf.patchmatch)
             second, second_info = stereo_surface(
-                DenseResult(fused, fused_normals, stats | {"near_mirror_pixels": dropped},
+                DenseResult(kept_points, kept_normals, stats | {"near_mirror_pixels": dropped},
                             maps, dense.sources))
             if second is not None:
                 surface, stereo_info = second, second_info

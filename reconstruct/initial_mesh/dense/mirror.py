@@ -18,6 +18,7 @@ from collections.abc import Mapping
 from dataclasses import replace
 
 import numpy as np
+import trimesh
 
 from reconstruct.initial_mesh.dense.patchmatch import ViewDepth
 from reconstruct.model.camera import Pose
@@ -33,26 +34,22 @@ def without_near_mirror(
     maps: Mapping[int, ViewDepth],
     poses: Mapping[int, Pose],
     light_offset: np.ndarray,
-    surface: RayCaster,
+    surface: trimesh.Trimesh,
     max_deg: float,
 ) -> tuple[dict[int, ViewDepth], int]:
     """Each view's depth map with the pixels dropped (NaN) whose ray meets ``surface`` where
     its normal lies within ``max_deg`` of the half-vector of the directions to the camera and
     to the light at ``light_offset`` (camera frame, metres, as ``light_mount.offset_m``), and
     how many pixels were dropped. Pixels whose ray misses ``surface`` are kept."""
+    caster = RayCaster(np.asarray(surface.vertices), np.asarray(surface.faces))
+    face_normals = np.asarray(surface.face_normals)
     out: dict[int, ViewDepth] = {}
     dropped = 0
-    face_normals = np.cross(
-        surface.vertices[surface.faces[:, 1]] - surface.vertices[surface.faces[:, 0]],
-        surface.vertices[surface.faces[:, 2]] - surface.vertices[surface.faces[:, 0]],
-    )
-    face_normals /= np.maximum(np.linalg.norm(face_normals, axis=1, keepdims=True), 1e-300)
     for view, vd in maps.items():
         rows, cols = np.nonzero(np.isfinite(vd.distance))
         pose = poses[view]
         rays = vd.intrinsics.pixel_rays(np.stack([cols + 0.5, rows + 0.5], 1)) @ pose.R
-        origins = np.broadcast_to(pose.center, rays.shape)
-        tri, distance, _ = surface.first_hit(origins, rays)
+        tri, distance, _ = caster.first_hit(np.broadcast_to(pose.center, rays.shape), rays)
         hit = tri >= 0
         points = pose.center + rays[hit] * distance[hit, None]
         n = len(points)

@@ -15,7 +15,7 @@ RADIUS = 0.1
 
 
 @pytest.fixture(scope="module")
-def sphere_view() -> tuple[ViewDepth, Pose, RayCaster]:
+def sphere_view() -> tuple[ViewDepth, Pose, trimesh.Trimesh]:
     """A sphere seen from 0.5 m with every pixel's true depth (NaN off the sphere)."""
     sphere = trimesh.creation.icosphere(subdivisions=5, radius=RADIUS)
     caster = RayCaster(np.asarray(sphere.vertices), np.asarray(sphere.faces))
@@ -25,7 +25,7 @@ def sphere_view() -> tuple[ViewDepth, Pose, RayCaster]:
     rays = intr.pixel_rays(np.stack([cc.ravel() + 0.5, rr.ravel() + 0.5], 1)) @ pose.R
     _, distance, _ = caster.first_hit(np.broadcast_to(pose.center, rays.shape), rays)
     depth = np.where(np.isfinite(distance), distance, np.nan).reshape(120, 120)
-    return ViewDepth(depth, np.zeros((120, 120, 3)), np.zeros((120, 120)), intr), pose, caster
+    return ViewDepth(depth, np.zeros((120, 120, 3)), np.zeros((120, 120)), intr), pose, sphere
 
 
 def _sphere_half_angles(vd: ViewDepth, pose: Pose, light: np.ndarray) -> np.ndarray:
@@ -41,9 +41,9 @@ def _sphere_half_angles(vd: ViewDepth, pose: Pose, light: np.ndarray) -> np.ndar
 
 
 def test_pixels_within_the_angle_of_the_mirror_direction_are_dropped(sphere_view) -> None:
-    vd, pose, caster = sphere_view
+    vd, pose, sphere = sphere_view
     offset = np.array([0.1, 0.0, 0.0])  # the lamp 10 cm beside the lens
-    maps, dropped = without_near_mirror({0: vd}, {0: pose}, offset, caster, 20.0)
+    maps, dropped = without_near_mirror({0: vd}, {0: pose}, offset, sphere, 20.0)
     kept = np.isfinite(maps[0].distance)
     angle = _sphere_half_angles(vd, pose, pose.light_position(offset))
     on_sphere = np.isfinite(vd.distance)
@@ -59,12 +59,11 @@ def test_pixels_within_the_angle_of_the_mirror_direction_are_dropped(sphere_view
 
 
 def test_nothing_is_dropped_at_zero_degrees_or_where_rays_miss_the_surface(sphere_view) -> None:
-    vd, pose, caster = sphere_view
-    maps, dropped = without_near_mirror({0: vd}, {0: pose}, np.zeros(3), caster, 0.0)
+    vd, pose, sphere = sphere_view
+    maps, dropped = without_near_mirror({0: vd}, {0: pose}, np.zeros(3), sphere, 0.0)
     assert dropped == 0
     assert np.array_equal(np.isfinite(maps[0].distance), np.isfinite(vd.distance))
     far = trimesh.creation.box(extents=(0.05, 0.05, 0.05))
     far.apply_translation([1.0, 0.0, 0.0])  # out of the view: every ray misses it
-    off = RayCaster(np.asarray(far.vertices), np.asarray(far.faces))
-    maps, dropped = without_near_mirror({0: vd}, {0: pose}, np.zeros(3), off, 45.0)
+    maps, dropped = without_near_mirror({0: vd}, {0: pose}, np.zeros(3), far, 45.0)
     assert dropped == 0
