@@ -134,11 +134,15 @@ def _inputs(session: Path, initial: Path | None, config: dict[str, Any]) -> tupl
     """The decoded frames, rig and calibration as the optimiser sees them (stages cached)."""
     from calibration.basis import default_basis
     from core.session import Session
+    from reconstruct.optimise.settings import OptimiseSettings
     from reconstruct.run.front import run_front
     from reconstruct.run.pipeline import optimiser_input
 
     opened = Session.open(session)
-    front = run_front(opened, {k: v for k, v in config.items() if k != "optimise"}, initial)
+    # glossy as the reconstruction had it, or the front end's stages would be built again
+    glossy = OptimiseSettings.from_mapping(config.get("optimise")).glossy
+    front_conf = {k: v for k, v in config.items() if k != "optimise"}
+    front = run_front(opened, front_conf, initial, glossy=glossy)
     return front, optimiser_input(front, opened, default_basis())
 
 

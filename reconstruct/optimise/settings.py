@@ -104,6 +104,12 @@ class OptimiseSettings:
     shadow_eps: float = bounded(1e-4, min=0.0, max=1.0)
     solver: SolverSettings = field(default_factory=SolverSettings)
 
+    @property
+    def glossy(self) -> bool:
+        """The object is declared glossy (gloss fitted or highlights down-weighted): the front
+        end leaves highlights out of fusion too (``reconstruct.run.front``)."""
+        return self.gloss != "none" or self.highlights
+
     @classmethod
     def from_mapping(
         cls, conf: Mapping[str, Any] | None, where: str = "config"

@@ -526,7 +526,7 @@ def _run(
     status.stage("front")
     front = run_front(
         session, {k: v for k, v in conf.items() if k in FRONT_SECTIONS}, initial_mesh,
-        glossy=settings.gloss != "none" or settings.highlights,
+        glossy=settings.glossy,
     )
     t_front = time.perf_counter() - t0
     t0 = time.perf_counter()
