@@ -116,6 +116,17 @@ SCENES = {
         ONE_RING_DEG,
         seed=5,
     ),
+    # added to judge the photometric term on what the responses see (issue 32) on a mesh,
+    # lamps, camera and trajectory that no choice was made on together
+    "ogre-ring": SceneSpec(
+        "ogre-ring",
+        "ogre.obj",
+        {"L1": "Airam.LED.9W.3000K", "L2": "Ledenergie.LED.Teho.T8.9W.4000K"},
+        "Hasselblad H2",
+        ONE_DISTANCE,
+        ONE_RING_DEG,
+        seed=6,
+    ),
 }
 SIZES = {
     "smoke": Size(width=160, height=120, focal_px=220.0, views=8, spp=16),

@@ -14,7 +14,10 @@ Residual blocks (E = Σ r², the paper's cost with no ½):
   ``Weights.spectral`` (:mod:`calibration.prior`: the training prior, or the paper's spectral
   smoothness, eq. 14, ``R_sᵀR_s = (D B)ᵀ(D B)``, when none is given);
 * photometric smoothness (eq. 15): ``sqrt(2 γ2 w_ij) R_b (α_i − α_j)`` per undirected edge with
-  ``R_bᵀR_b = BᵀB`` (the paper's double sum visits each edge twice);
+  ``R_bᵀR_b = PᵀBᵀBP`` (the paper's double sum visits each edge twice), P the projection onto
+  what the rig's responses see (:func:`seen_projection`): in the rest, which no observation
+  holds, neighbours would pass their spectra across the whole mesh (a black patch took the far
+  red of the paints around it), and the spectral regulariser completes each vertex alone;
 * geometric smoothness (eq. 16): ``sqrt(γ3) n_iᵀ(x_i − x̄_i) / l_i``: distance of the vertex to the
   plane through its neighbours' centroid x̄_i with the vertex normal, over the scale l_i.
 
@@ -51,6 +54,21 @@ TERMS = ("rendering", "spectral", "photometric", "geometric")
 def _r_factor(m: np.ndarray) -> np.ndarray:
     """Square R with ``RᵀR = mᵀm`` (QR of a tall matrix)."""
     return np.asarray(np.linalg.qr(m, mode="r"))
+
+
+def seen_projection(B: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """The projection P (N_b, N_b) of basis weights onto the part the responses ``Q``
+    (K, 3, N_b) see, along their null space, orthogonal in the spectra's metric BᵀB: two
+    weights with the same responses have the same P α, and P α is the smallest spectrum that
+    renders as α does.
+
+    >>> B = np.eye(3); Q = np.array([[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]]])
+    >>> np.allclose(seen_projection(B, Q) @ [1.0, 2.0, 3.0], [1.0, 2.0, 0.0])
+    True
+    """
+    metric_inv = np.linalg.pinv(B.T @ B, hermitian=True)
+    rows = Q.reshape(-1, Q.shape[-1])
+    return metric_inv @ rows.T @ np.linalg.pinv(rows @ metric_inv @ rows.T, hermitian=True) @ rows
 
 
 def _summation(index: np.ndarray, n_rows: int) -> sp.csr_array:
@@ -107,7 +125,7 @@ class JointCost:
         self.Q = np.einsum("knl,lb->knb", p.rig.responses, B)  # (K, 3, N_b)
         spectral = p.weights.spectral or SpectralRegulariser("smoothness", smoothness_gram(B))
         self.R_s = spectral.factor
-        self.R_b = _r_factor(B)
+        self.R_b = _r_factor(B @ seen_projection(B, self.Q))
         self.SS = self.R_s.T @ self.R_s
         self.BB = self.R_b.T @ self.R_b
         self.QtQ = np.einsum("kcb,kcd->kbd", self.Q, self.Q)

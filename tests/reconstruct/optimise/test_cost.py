@@ -9,7 +9,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
 from reconstruct.model.forward import render_values, response_matrix, shading
-from reconstruct.optimise.cost import JointCost
+from reconstruct.optimise.cost import JointCost, seen_projection
 from reconstruct.optimise.mesh import vertex_normals
 from reconstruct.optimise.solver import ArrowheadPreconditioner
 from reconstruct.optimise.synthetic import SyntheticScene
@@ -197,3 +197,34 @@ def test_fixed_positions_keep_reflectance_and_light_parts_exact(
     assert np.allclose(part.matvec(v)[free], full.matvec(v)[free], rtol=1e-12, atol=1e-12)
     (vp, lp), (vf, lf) = part.diagonal_blocks(), full.diagonal_blocks()
     assert np.allclose(vp[:, 3:, 3:], vf[:, 3:, 3:], rtol=1e-12) and np.allclose(lp, lf)
+
+
+
+def test_neighbours_are_compared_on_what_the_responses_see(scene: SyntheticScene) -> None:
+    """Spectra that render alike cost nothing in the photometric term: what no observation
+    holds is the spectral regulariser's, vertex by vertex, not passed along the mesh."""
+    problem, theta = problem_at(scene, images=False)
+    cost = JointCost(problem)
+    X, A, light = problem.unpack(theta)
+    rows = cost.Q.reshape(-1, cost.Q.shape[-1])
+    unseen = np.linalg.svd(rows)[2][-1]  # a weight direction every response is blind to
+    assert np.abs(rows @ unseen).max() < 1e-9 * np.abs(rows).max()
+    shift = np.random.default_rng(0).normal(0.0, 0.05, len(A))[:, None] * unseen
+    before = cost.terms(theta)
+    after = cost.terms(problem.pack(X, A + shift, light))
+    assert before["photometric"] > 0
+    assert after["photometric"] == pytest.approx(before["photometric"], rel=1e-9)
+    assert after["spectral"] != pytest.approx(before["spectral"], rel=1e-3)
+
+
+def test_the_seen_part_is_the_smallest_spectrum_that_renders_alike(scene: SyntheticScene) -> None:
+    problem, _ = problem_at(scene, images=False)
+    B, Q = scene.basis.B, JointCost(problem).Q
+    rows = Q.reshape(-1, Q.shape[-1])
+    P = seen_projection(B, Q)
+    a = np.random.default_rng(1).normal(size=B.shape[1])
+    np.testing.assert_allclose(P @ P, P, atol=1e-10)
+    np.testing.assert_allclose(rows @ (P @ a), rows @ a, rtol=1e-9)
+    unseen = np.linalg.svd(rows)[2][-1]
+    for t in (-0.3, 0.1, 0.5):
+        assert np.linalg.norm(B @ (P @ a)) < np.linalg.norm(B @ (P @ a + t * unseen))

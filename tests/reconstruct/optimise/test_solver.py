@@ -75,7 +75,7 @@ def test_light_only_stage_recovers_the_offset_from_zero(scene: SyntheticScene) -
         reflectance_bounds=(0.0, 1.0),  # as the pipeline's stages run
     )
     _, A, light = problem.unpack(result.theta)
-    assert np.linalg.norm(light[0] - scene.light_offset) < 1e-3
+    assert np.linalg.norm(light[0] - scene.light_offset) < 1.5e-3  # of a 63 mm offset
     assert all(b <= a * (1 + 1e-12) for a, b in zip(history, history[1:], strict=False))
     err = np.sqrt(np.mean((scene.basis.reconstruct(A) - scene.reflectance) ** 2))
     err0 = np.sqrt(np.mean((scene.basis.reconstruct(alpha0) - scene.reflectance) ** 2))

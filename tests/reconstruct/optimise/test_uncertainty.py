@@ -159,7 +159,7 @@ def test_reflectance_prior_is_the_training_weights_and_what_the_basis_misses():
 def test_reflectance_std_covers_the_actual_error_and_ranks_it():
     # the regularisers decide what 2 illuminations cannot see: the std must hold that error
     # (~95 % of the truths inside ±2σ) and be largest where it is (the plain Gauss–Newton std
-    # does neither: it is smallest where the regularisers decide most)
+    # does neither: it is smallest where the regularisers decide most, and ranks far worse)
     # (without the upper bound: on this scene the bounds cut exactly the smoothness
     # overshoots the std's offset term ranks, and the rest of the error sits where few views
     # see a vertex, which the std ranks less well — bench/README.md)
@@ -173,6 +173,7 @@ def test_reflectance_std_covers_the_actual_error_and_ranks_it():
     rms = np.sqrt(np.mean(err**2, axis=1))
     std = unc.reflectance_std[seen]
     assert 0.85 <= np.mean(np.abs(err) <= 2 * std) <= 0.99
-    assert spearmanr(std.mean(axis=1), rms).statistic >= 0.5
+    rank = spearmanr(std.mean(axis=1), rms).statistic
+    assert rank >= 0.5
     gn = unc.reflectance_std_gn[seen]
-    assert spearmanr(gn.mean(axis=1), rms).statistic < 0.2
+    assert spearmanr(gn.mean(axis=1), rms).statistic < rank - 0.25
