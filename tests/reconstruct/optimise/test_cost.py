@@ -199,7 +199,6 @@ def test_fixed_positions_keep_reflectance_and_light_parts_exact(
     assert np.allclose(vp[:, 3:, 3:], vf[:, 3:, 3:], rtol=1e-12) and np.allclose(lp, lf)
 
 
-
 def test_neighbours_are_compared_on_what_the_responses_see(scene: SyntheticScene) -> None:
     """Spectra that render alike cost nothing in the photometric term: what no observation
     holds is the spectral regulariser's, vertex by vertex, not passed along the mesh."""

@@ -158,8 +158,8 @@ def test_reflectance_prior_is_the_training_weights_and_what_the_basis_misses():
 
 def test_reflectance_std_covers_the_actual_error_and_ranks_it():
     # the regularisers decide what 2 illuminations cannot see: the std must hold that error
-    # (~95 % of the truths inside ±2σ) and be largest where it is (the plain Gauss–Newton std
-    # does neither: it is smallest where the regularisers decide most, and ranks far worse)
+    # (~95 % of the truths inside ±2σ) and be largest where it is (the plain Gauss–Newton std,
+    # with the regularisers as its prior, ranks it far worse)
     # (without the upper bound: on this scene the bounds cut exactly the smoothness
     # overshoots the std's offset term ranks, and the rest of the error sits where few views
     # see a vertex, which the std ranks less well — bench/README.md)
