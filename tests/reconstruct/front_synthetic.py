@@ -45,14 +45,15 @@ def render(
     hit = tri >= 0
     x = origin[hit] + dist[hit, None] * dirs[hit]
     n = mesh.face_normals[tri[hit]]
-    shade = np.clip(-np.einsum("ij,ij->i", n, dirs[hit]), 0, 1) / dist[hit] ** 2 * 0.08
+    irradiance = 0.08 / dist[hit] ** 2
+    shade = np.clip(-np.einsum("ij,ij->i", n, dirs[hit]), 0, 1) * irradiance
     theta = np.arctan2(x[:, 1], x[:, 0])
     phi = np.arccos(np.clip(x[:, 2] / np.linalg.norm(x, axis=1), -1, 1))
     albedo = 0.35 + 0.3 * ((np.floor(theta * 12) + np.floor(phi * 12)) % 2)
     to_eye = -dirs[hit]
     lobe = ggx_lobe(n, to_eye, to_eye, 0.2, gloss) if gloss else np.zeros(len(x))
     img = np.zeros((len(uv), 3))
-    img[hit] = (shade * albedo + lobe / dist[hit] ** 2 * 0.08)[:, None] * gain
+    img[hit] = (shade * albedo + lobe * irradiance)[:, None] * gain
     return img.reshape(intr.height, intr.width, 3).astype(np.float32)
 
 

@@ -9,6 +9,7 @@ import trimesh
 from reconstruct.initial_mesh.dense.mirror import without_near_mirror
 from reconstruct.initial_mesh.dense.patchmatch import ViewDepth
 from reconstruct.model.camera import Intrinsics, Pose
+from reconstruct.model.forward import half_angles
 from reconstruct.model.raycast import RayCaster
 
 RADIUS = 0.1
@@ -33,11 +34,8 @@ def _sphere_half_angles(vd: ViewDepth, pose: Pose, light: np.ndarray) -> np.ndar
     rr, cc = np.mgrid[0:120, 0:120]
     rays = vd.intrinsics.pixel_rays(np.stack([cc.ravel() + 0.5, rr.ravel() + 0.5], 1)) @ pose.R
     x = pose.center + rays * vd.distance.reshape(-1, 1)
-    normal = x / RADIUS
-    half = (light - x) / np.linalg.norm(light - x, axis=1, keepdims=True)
-    half += (pose.center - x) / np.linalg.norm(pose.center - x, axis=1, keepdims=True)
-    half /= np.linalg.norm(half, axis=1, keepdims=True)
-    return np.degrees(np.arccos(np.clip(np.sum(normal * half, axis=1), -1, 1))).reshape(120, 120)
+    lights, cameras = np.broadcast_to(light, x.shape), np.broadcast_to(pose.center, x.shape)
+    return np.degrees(half_angles(x, x / RADIUS, lights, cameras)).reshape(120, 120)
 
 
 def test_pixels_within_the_angle_of_the_mirror_direction_are_dropped(sphere_view) -> None:
