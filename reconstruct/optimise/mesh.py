@@ -103,3 +103,43 @@ class NormalJacobian:
 def normal_jacobian(vertices: np.ndarray, faces: np.ndarray) -> sp.bsr_array:
     """``∂n/∂X`` (see :class:`NormalJacobian`; build that once to evaluate it repeatedly)."""
     return NormalJacobian(faces, len(vertices))(vertices)
+
+
+def boundary_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """True for the vertices on an edge that only one face uses (N,)."""
+    f = np.asarray(faces, dtype=np.int64)
+    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    unique, count = np.unique(e, axis=0, return_counts=True)
+    on_boundary = np.zeros(n_vertices, dtype=bool)
+    on_boundary[unique[count == 1].ravel()] = True
+    return on_boundary
+
+
+def relax_tangentially(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    movable: np.ndarray | None = None,
+    iterations: int = 5,
+    step: float = 0.5,
+) -> np.ndarray:
+    """Vertices moved towards their 1-ring centroids within their tangent planes.
+
+    Moving each vertex along its own normal (as the joint stages do) leaves the triangles
+    uneven and folds slivers over; the data term is blind to motion along the surface, so
+    evening it out keeps the shape and unfolds them. Only ``movable`` vertices (all, if None)
+    off the boundary move.
+    """
+    X = np.array(vertices, dtype=float)
+    n = len(X)
+    adj = adjacency(faces, n)
+    degree = np.asarray(adj.sum(axis=1)).ravel()
+    ring_mean = sp.diags_array(1.0 / np.maximum(degree, 1.0)) @ adj
+    free = (degree > 0) & ~boundary_vertices(faces, n)
+    if movable is not None:
+        free &= movable
+    for _ in range(iterations):
+        normals, _ = vertex_normals(X, faces)
+        towards = ring_mean @ X - X
+        towards -= np.einsum("ij,ij->i", towards, normals)[:, None] * normals
+        X[free] += step * towards[free]
+    return X

@@ -22,7 +22,7 @@ from core.errors import RigError
 from reconstruct.optimise.checkpoint import Checkpoint, OptimiseState
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.gloss import GlossFit, colour_without_gloss, without_gloss
-from reconstruct.optimise.mesh import adjacency, vertex_normals
+from reconstruct.optimise.mesh import adjacency, relax_tangentially, vertex_normals
 from reconstruct.optimise.problem import Problem
 from reconstruct.optimise.problem_setup import (
     build_problem,
@@ -312,8 +312,12 @@ def optimise(
             stage, outer, problem, theta, mask, cfg.joint_iterations, directions, within_reach,
             gloss,
         )
-        X_new, _, light_new = problem.unpack(theta)
+        X_new, A_new, light_new = problem.unpack(theta)
         moved = float(np.max(np.linalg.norm(X_new - X_prev, axis=1)))
+        # what the stage moved along the normals, evened out along the surface (within the
+        # same bounds as the stage's own steps)
+        X_even = relax_tangentially(X_new, problem.faces, views >= max(cfg.min_views, 1))
+        theta = within_reach(problem.pack(X_even, A_new, light_new))
         light_moved = float(np.max(np.linalg.norm(light_new - light_prev, axis=1)))
         tol = cfg.settle_position * float(np.mean(problem.weights.scale))
         log.info("outer %d: vertices moved ≤ %.3g m, light ≤ %.3g m", outer, moved, light_moved)

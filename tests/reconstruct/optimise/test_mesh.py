@@ -1,4 +1,4 @@
-"""Vertex normals and their Jacobian, adjacency."""
+"""Vertex normals and their Jacobian, adjacency, tangential relaxation."""
 
 from __future__ import annotations
 
@@ -9,8 +9,10 @@ from reconstruct.model.render import vertex_normals as render_normals
 from reconstruct.optimise.mesh import (
     NormalJacobian,
     adjacency,
+    boundary_vertices,
     edges,
     normal_jacobian,
+    relax_tangentially,
     vertex_normals,
 )
 
@@ -69,3 +71,45 @@ def test_normal_jacobian_is_reusable_and_keeps_isolated_vertices() -> None:
     last = len(X) - 1
     assert nj.block_row[-1] == last and nj.block_col[-1] == last
     assert nj.indptr[-1] - nj.indptr[-2] == 1
+
+
+def _flipped_faces(vertices: np.ndarray, faces: np.ndarray) -> int:
+    """Faces whose normal points into a sphere centred at the origin."""
+    tri = vertices[faces]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    return int(np.sum(np.einsum("ij,ij->i", normal, tri.mean(axis=1)) < 0))
+
+
+def test_relaxation_unfolds_slivers_and_keeps_the_surface() -> None:
+    """Vertices pushed along the surface past their neighbours (what moving along stale normals
+    does) fold triangles over; relaxing within the tangent planes unfolds them and leaves the
+    points on the sphere."""
+    sphere = trimesh.creation.icosphere(4)
+    rng = np.random.default_rng(3)
+    X = np.asarray(sphere.vertices, dtype=float)
+    n = X / np.linalg.norm(X, axis=1, keepdims=True)
+    shift = rng.normal(0.0, 0.02, X.shape)  # about 0.8 of an edge
+    shift -= np.einsum("ij,ij->i", shift, n)[:, None] * n
+    crumpled = X + shift
+    crumpled /= np.linalg.norm(crumpled, axis=1, keepdims=True)
+    faces = np.asarray(sphere.faces)
+    assert _flipped_faces(crumpled, faces) > 50
+    relaxed = relax_tangentially(crumpled, faces)
+    assert _flipped_faces(relaxed, faces) == 0
+    radius = np.linalg.norm(relaxed, axis=1)
+    assert np.abs(radius - 1.0).max() < 5e-3  # along the surface, to first order (edge 0.075)
+
+
+def test_relaxation_moves_only_movable_vertices_off_the_boundary() -> None:
+    grid = trimesh.creation.box().subdivide().subdivide()
+    faces = np.asarray(grid.faces)
+    open_faces = faces[np.asarray(grid.triangles_center)[:, 2] < 0.49]  # top face cut away
+    X = np.asarray(grid.vertices) + np.random.default_rng(0).normal(0.0, 0.01, grid.vertices.shape)
+    rim = boundary_vertices(open_faces, len(X))
+    assert rim.sum() > 0 and not rim.all()
+    movable = np.ones(len(X), bool)
+    movable[:5] = False
+    relaxed = relax_tangentially(X, open_faces, movable)
+    still = rim | ~movable
+    np.testing.assert_array_equal(relaxed[still], X[still])
+    assert np.abs(relaxed[~still] - X[~still]).max() > 1e-4
