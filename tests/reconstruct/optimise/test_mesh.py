@@ -101,10 +101,10 @@ def test_relaxation_unfolds_slivers_and_keeps_the_surface() -> None:
 
 
 def test_relaxation_moves_only_movable_vertices_off_the_boundary() -> None:
-    grid = trimesh.creation.box().subdivide().subdivide()
-    faces = np.asarray(grid.faces)
-    open_faces = faces[np.asarray(grid.triangles_center)[:, 2] < 0.49]  # top face cut away
-    X = np.asarray(grid.vertices) + np.random.default_rng(0).normal(0.0, 0.01, grid.vertices.shape)
+    box = trimesh.creation.box().subdivide().subdivide()
+    faces = np.asarray(box.faces)
+    open_faces = faces[np.asarray(box.triangles_center)[:, 2] < 0.49]  # top face cut away
+    X = np.asarray(box.vertices) + np.random.default_rng(0).normal(0.0, 0.01, box.vertices.shape)
     rim = boundary_vertices(open_faces, len(X))
     assert rim.sum() > 0 and not rim.all()
     movable = np.ones(len(X), bool)
