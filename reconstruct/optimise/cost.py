@@ -43,7 +43,7 @@ from reconstruct.optimise.kernels.normal_equations import (
 from reconstruct.optimise.kernels.rendering import rendered_error, shading_gradients
 from reconstruct.optimise.kernels.sampling import project_points
 from reconstruct.optimise.linearisation import Linearisation
-from reconstruct.optimise.mesh import NormalJacobian, adjacency, vertex_normals
+from reconstruct.optimise.mesh import NormalJacobian, adjacency, ring_mean, vertex_normals
 from reconstruct.optimise.problem import Problem
 from reconstruct.optimise.sampling import sample_pairs, view_cameras
 
@@ -132,15 +132,12 @@ class JointCost:
         g1, g2, g3 = p.weights.gamma
         self.gamma = (float(g1), float(g2), float(g3))
         n = p.n_vertices
-        adj = adjacency(p.faces, n)
-        deg = np.asarray(adj.sum(axis=1)).ravel()
-        self.ring_mean = sp.diags_array(1.0 / np.maximum(deg, 1.0)) @ adj
+        self.ring_mean = ring_mean(adjacency(p.faces, n))
         self.normal_jacobian = NormalJacobian(p.faces, n)
         nj = self.normal_jacobian
         # I − ring mean on dn's block sparsity (same 1-ring, plus the diagonal).
-        ring = self.ring_mean.tocsr()
         self.umbrella_blocks = (nj.block_row == nj.block_col) - np.asarray(
-            ring[nj.block_row, nj.block_col]
+            self.ring_mean[nj.block_row, nj.block_col]
         ).ravel()
         e = p.weights.edges
         w = 2.0 * self.gamma[1] * np.asarray(p.weights.edge_weight, dtype=float)

@@ -29,6 +29,12 @@ def adjacency(faces: np.ndarray, n_vertices: int) -> sp.csr_array:
     return a
 
 
+def ring_mean(adj: sp.csr_array) -> sp.csr_array:
+    """The operator taking vertex values to the mean over each vertex's 1-ring (N, N)."""
+    degree = np.asarray(adj.sum(axis=1)).ravel()
+    return sp.csr_array(sp.diags_array(1.0 / np.maximum(degree, 1.0)) @ adj)
+
+
 def edges(adj: sp.csr_array) -> np.ndarray:
     """Unique undirected edges (E, 2) with i < j from an adjacency matrix."""
     upper = sp.triu(adj, k=1).tocoo()
@@ -108,10 +114,13 @@ def normal_jacobian(vertices: np.ndarray, faces: np.ndarray) -> sp.bsr_array:
 def boundary_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """True for the vertices on an edge that only one face uses (N,)."""
     f = np.asarray(faces, dtype=np.int64)
-    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-    unique, count = np.unique(e, axis=0, return_counts=True)
+    a, b = f.ravel(), f[:, [1, 2, 0]].ravel()
+    # an edge as one integer, as in reconstruct.initial_mesh.repair: a 1-D unique is fast
+    key, count = np.unique(np.minimum(a, b) * n_vertices + np.maximum(a, b), return_counts=True)
+    once = key[count == 1]
     on_boundary = np.zeros(n_vertices, dtype=bool)
-    on_boundary[unique[count == 1].ravel()] = True
+    on_boundary[once // n_vertices] = True
+    on_boundary[once % n_vertices] = True
     return on_boundary
 
 
@@ -132,14 +141,13 @@ def relax_tangentially(
     X = np.array(vertices, dtype=float)
     n = len(X)
     adj = adjacency(faces, n)
-    degree = np.asarray(adj.sum(axis=1)).ravel()
-    ring_mean = sp.diags_array(1.0 / np.maximum(degree, 1.0)) @ adj
-    free = (degree > 0) & ~boundary_vertices(faces, n)
+    centroid = ring_mean(adj)
+    free = (np.diff(adj.indptr) > 0) & ~boundary_vertices(faces, n)  # has neighbours, no rim
     if movable is not None:
         free &= movable
     for _ in range(iterations):
         normals, _ = vertex_normals(X, faces)
-        towards = ring_mean @ X - X
+        towards = centroid @ X - X
         towards -= np.einsum("ij,ij->i", towards, normals)[:, None] * normals
         X[free] += step * towards[free]
     return X
