@@ -14,6 +14,7 @@ from calibration.estimation import DEFAULT_SMOOTHNESS
 from calibration.prior import Regulariser
 from core.config import bounded, from_mapping
 from reconstruct.optimise.cost import Robust
+from reconstruct.optimise.pooling import PoolingSettings
 from reconstruct.optimise.problem import Frames, Rig
 from reconstruct.optimise.solver import SolverSettings
 
@@ -103,6 +104,9 @@ class OptimiseSettings:
     min_view_cos: float = bounded(0.3, min=-1.0, max=1.0)
     shadow_eps: float = bounded(1e-4, min=0.0, max=1.0)
     solver: SolverSettings = field(default_factory=SolverSettings)
+    # Vertices the solve left folded take the colour of settled neighbours that agree on one
+    # paint (reconstruct/optimise/pooling.py; ``max_fold_deg: 0`` keeps every vertex's own).
+    pooling: PoolingSettings = field(default_factory=PoolingSettings)
 
     @property
     def glossy(self) -> bool:

@@ -23,6 +23,7 @@ from reconstruct.optimise.checkpoint import Checkpoint, OptimiseState
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.gloss import GlossFit, colour_without_gloss, without_gloss
 from reconstruct.optimise.mesh import adjacency, relax_tangentially, vertex_normals
+from reconstruct.optimise.pooling import pooled_sources
 from reconstruct.optimise.problem import Problem
 from reconstruct.optimise.problem_setup import (
     build_problem,
@@ -54,6 +55,9 @@ class OptimiseResult:
     stage_seconds: dict[str, float]
     initial_alpha: np.ndarray
     uncertainty: VertexUncertainty | None = None  # at the final θ (optimise/uncertainty.py)
+    # per vertex, the vertex whose reflectance it carries: itself, or a settled neighbour
+    # where its own shape was left folded (optimise/pooling.py)
+    colour_source: np.ndarray | None = None
 
 
 Progress = Callable[[str, IterationRecord], None]
@@ -367,8 +371,12 @@ def optimise(
     observed, count = problem.obs.per_vertex > 0, problem.obs.count
     if state is not None and state.done:  # as the finished solve saw them, not re-derived
         observed, count = state.observed, state.n_observations
+    source = pooled_sources(X, problem.faces, inp.basis.reconstruct(A), observed, cfg.pooling)
+    pooled = int(np.count_nonzero(source != np.arange(len(X))))
+    log.info("%d folded vertices take the colour of settled neighbours", pooled)
+    A, uncertainty = A[source], uncertainty.colour_from(source)
     final = OptimiseState(0, True, X, A, light, A0, observed, count, history, seconds)
-    return _result(inp, cfg, X, A, light, final, A0, history, uncertainty)
+    return _result(inp, cfg, X, A, light, final, A0, history, uncertainty, source)
 
 
 def _result(
@@ -381,6 +389,7 @@ def _result(
     A0: np.ndarray,
     history: list[dict[str, Any]],
     uncertainty: VertexUncertainty,
+    colour_source: np.ndarray,
 ) -> OptimiseResult:
     return OptimiseResult(
         vertices=X.copy(),
@@ -396,4 +405,5 @@ def _result(
         stage_seconds=state.seconds,
         initial_alpha=A0,
         uncertainty=uncertainty,
+        colour_source=colour_source,
     )

@@ -42,7 +42,7 @@ model errors beyond what the residuals show.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -65,6 +65,19 @@ class VertexUncertainty:
     noise_std: float  # per-channel image noise from the residuals, linear image units
     dof: int
     reflectance_std_gn: np.ndarray | None = None  # plain Gauss–Newton std (regularisers as prior)
+
+    def colour_from(self, source: np.ndarray) -> VertexUncertainty:
+        """The uncertainty where each vertex's reflectance is that of vertex ``source`` (N,):
+        the colour rows move with it, the position's stays."""
+        gn = self.reflectance_std_gn
+        return replace(
+            self,
+            reflectance_std=self.reflectance_std[source],
+            reflectance_low=self.reflectance_low[source],
+            reflectance_high=self.reflectance_high[source],
+            alpha_cov=self.alpha_cov[source],
+            reflectance_std_gn=None if gn is None else gn[source],
+        )
 
     def summary(self) -> dict[str, float | int]:
         """Numbers for report.json."""

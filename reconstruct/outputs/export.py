@@ -9,7 +9,8 @@
   ``reflectance`` (N, N_λ), ``alpha`` (N, N_b), ``basis`` (N_λ, N_b), ``normals``, ``observed``,
   with an uncertainty ``reflectance_std`` (N, N_λ) and ``position_std_m`` (N,) (std along the
   normal; NaN where not estimated) and ``reflectance_low``/``reflectance_high`` (N, N_λ), the
-  95 % band inside the physical range;
+  95 % band inside the physical range, and ``colour_source`` (N,) int, the vertex whose
+  reflectance each carries (itself, or a settled neighbour where its shape was left folded);
 * ``report.json`` — see :func:`write_report`.
 """
 

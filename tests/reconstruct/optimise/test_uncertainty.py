@@ -89,6 +89,11 @@ def test_optimise_reports_and_export_writes_the_uncertainty(tmp_path, noisy):
     data = export.read_reflectance_npz(npz)
     np.testing.assert_array_equal(data["reflectance_std"], unc.reflectance_std)
     np.testing.assert_array_equal(data["position_std_m"], unc.position_std_m)
+    # a vertex's colour and its band come from one vertex, itself or a settled neighbour
+    src = data["colour_source"]
+    np.testing.assert_array_equal(src, result.colour_source)
+    np.testing.assert_array_equal(result.alpha, result.alpha[src])
+    np.testing.assert_array_equal(unc.reflectance_high, unc.reflectance_high[src])
     header = mesh.read_bytes().split(b"end_header")[0].decode()
     assert "property float refl_std_400" in header and "property float position_std_m" in header
     summary = json.loads(report_path.read_text())["uncertainty"]

@@ -64,6 +64,7 @@ def recon_dir(tmp_path_factory: pytest.TempPathFactory, scene: SyntheticScene) -
             }
         ],
         initial_alpha=scene.alpha,
+        colour_source=np.r_[1, np.arange(1, n)],  # vertex 0 carries vertex 1's colour
     )
     export_result(
         out, scene.input(), result, OptimiseSettings(), {"reflectance_scale_absolute": True}
@@ -136,7 +137,9 @@ def test_npz_and_report_hold_the_fixed_names(recon_dir: Path, scene: SyntheticSc
     for key in ("vertices", "faces", "wavelengths_nm", "reflectance", "alpha", "basis"):
         assert key in data
     assert data["reflectance"].shape == (len(scene.vertices), 31)
+    assert data["colour_source"][:2].tolist() == [1, 1]
     report = json.loads((recon_dir / export.REPORT_FILE).read_text())
+    assert report["colour_from_neighbours"] == 1
     assert np.allclose(report["light"]["offset_m"], scene.light_offset)
     assert len(report["light"]["positions_m"]) == scene.rig.n_views
     assert report["reflectance_scale_absolute"] is True
