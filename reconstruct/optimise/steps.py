@@ -371,7 +371,9 @@ def optimise(
     observed, count = problem.obs.per_vertex > 0, problem.obs.count
     if state is not None and state.done:  # as the finished solve saw them, not re-derived
         observed, count = state.observed, state.n_observations
-    source = pooled_sources(X, problem.faces, inp.basis.reconstruct(A), observed, cfg.pooling)
+    # the agreement is in reflectance units, which a scale known only up to a factor lacks
+    pooling = cfg.pooling if np.isfinite(upper) else replace(cfg.pooling, max_fold_deg=0.0)
+    source = pooled_sources(X, problem.faces, inp.basis.reconstruct(A), observed, pooling)
     pooled = int(np.count_nonzero(source != np.arange(len(X))))
     log.info("%d folded vertices take the colour of settled neighbours", pooled)
     A, uncertainty = A[source], uncertainty.colour_from(source)

@@ -10,6 +10,7 @@ import trimesh
 
 from calibration.bounds import ROUND_OFF
 from reconstruct.optimise.mesh import adjacency, edges
+from reconstruct.optimise.pooling import PoolingSettings
 from reconstruct.optimise.problem_setup import build_problem, initial_reflectance
 from reconstruct.optimise.settings import OptimiseSettings
 from reconstruct.optimise.steps import optimise
@@ -64,6 +65,19 @@ def test_reflectance_stays_physical_and_closer_to_the_truth(scene: SyntheticScen
         np.sqrt(np.mean((r.reflectance - scene.reflectance)[seen] ** 2)) for r in (bounded, free)
     ]
     assert rmse[0] < 0.9 * rmse[1]
+
+
+def test_pooling_needs_the_reflectances_absolute_scale(scene: SyntheticScene) -> None:
+    """Its agreement is in reflectance units: where the scale is known only up to a factor
+    every vertex keeps its own colour."""
+    pooling = PoolingSettings(max_fold_deg=0.5, agree_rmse=0.5)
+    cfg = OptimiseSettings(outer_iterations=1, joint_iterations=3, pooling=pooling)
+    inp = scene.input(scene.vertices)
+    pooled = [
+        np.count_nonzero(r.colour_source != np.arange(len(r.vertices)))
+        for r in (optimise(inp, cfg), optimise(replace(inp, reflectance_upper=np.inf), cfg))
+    ]
+    assert pooled[0] > 0 and pooled[1] == 0
 
 
 def test_light_stage_on_images_finds_the_offset(image_scene: SyntheticScene) -> None:
