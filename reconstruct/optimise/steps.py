@@ -59,6 +59,13 @@ class OptimiseResult:
     # where its own shape was left folded (optimise/pooling.py)
     colour_source: np.ndarray | None = None
 
+    @property
+    def colour_from_neighbours(self) -> int | None:
+        """How many vertices carry a neighbour's colour (None: not recorded)."""
+        if self.colour_source is None:
+            return None
+        return int(np.count_nonzero(self.colour_source != np.arange(len(self.colour_source))))
+
 
 Progress = Callable[[str, IterationRecord], None]
 
@@ -374,11 +381,13 @@ def optimise(
     # the agreement is in reflectance units, which a scale known only up to a factor lacks
     pooling = cfg.pooling if np.isfinite(upper) else replace(cfg.pooling, max_fold_deg=0.0)
     source = pooled_sources(X, problem.faces, inp.basis.reconstruct(A), observed, pooling)
-    pooled = int(np.count_nonzero(source != np.arange(len(X))))
-    log.info("%d folded vertices take the colour of settled neighbours", pooled)
     A, uncertainty = A[source], uncertainty.colour_from(source)
     final = OptimiseState(0, True, X, A, light, A0, observed, count, history, seconds)
-    return _result(inp, cfg, X, A, light, final, A0, history, uncertainty, source)
+    result = _result(inp, cfg, X, A, light, final, A0, history, uncertainty, source)
+    log.info(
+        "%d folded vertices take the colour of settled neighbours", result.colour_from_neighbours
+    )
+    return result
 
 
 def _result(

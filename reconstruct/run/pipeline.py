@@ -278,10 +278,8 @@ def export_result(
     )
     # the 2-D estimate the joint solve started from, for viewers comparing the two
     arrays["initial_reflectance"] = inp.basis.reconstruct(result.initial_alpha)
-    pooled = None
     if result.colour_source is not None:
         arrays["colour_source"] = result.colour_source
-        pooled = int(np.count_nonzero(result.colour_source != np.arange(len(result.vertices))))
     ply_extra = (
         {}
         if unc is None
@@ -369,7 +367,7 @@ def export_result(
         "faces": len(result.faces),
         "observed_vertices": int(result.observed.sum()),
         "observations": result.n_observations,
-        "colour_from_neighbours": pooled,
+        "colour_from_neighbours": result.colour_from_neighbours,
         "uncertainty": None if unc is None else unc.summary(),
         "history": result.history,
         "timings_s": {**extra.pop("timings_s", {}), **result.stage_seconds},
