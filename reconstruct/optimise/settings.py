@@ -104,6 +104,11 @@ class OptimiseSettings:
     min_view_cos: float = bounded(0.3, min=-1.0, max=1.0)
     shadow_eps: float = bounded(1e-4, min=0.0, max=1.0)
     solver: SolverSettings = field(default_factory=SolverSettings)
+    # After the solve, each vertex's basis weights along the directions the stacked responses
+    # see at less than this share of their strongest are re-set by the spectral regulariser
+    # alone (calibration/unseen.py): there the fit follows the images' noise (bench/README.md,
+    # "Weakly seen directions"). 0: the data's, however weak.
+    weakly_seen_share: float = bounded(0.003, min=0.0, max=1.0)
     # Vertices the solve left folded take the colour of settled neighbours that agree on one
     # paint (reconstruct/optimise/pooling.py; ``max_fold_deg: 0`` keeps every vertex's own).
     pooling: PoolingSettings = field(default_factory=PoolingSettings)

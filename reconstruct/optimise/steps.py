@@ -18,6 +18,8 @@ from typing import Any
 import numpy as np
 
 from calibration.bounds import project
+from calibration.prior import spectral_regulariser
+from calibration.unseen import complete_unseen, weak_directions
 from core.errors import RigError
 from reconstruct.optimise.checkpoint import Checkpoint, OptimiseState
 from reconstruct.optimise.cost import JointCost
@@ -363,6 +365,15 @@ def optimise(
     if problem.frames is not inp.frames:  # ended on a coarse level: judge it at full resolution
         X, _, light = problem.unpack(theta)
         problem = build_problem(inp, X, light, cfg)
+    X, A, light = problem.unpack(theta)
+    spectral = problem.weights.spectral or spectral_regulariser("smoothness", inp.basis)
+    share = cfg.weakly_seen_share
+    A = complete_unseen(A, B, inp.rig.responses, spectral.matrix, share, 0.0, upper)
+    log.info(
+        "%d of %d spectral directions seen below %.2g of the strongest: set by the regulariser",
+        weak_directions(B, inp.rig.responses, share).shape[1], B.shape[1], share
+    )
+    theta = problem.pack(X, A, light)
     solved = cfg.optimise_positions and last_outer > 0
     o = problem.obs
     views = np.bincount(o.vertex[o.pair_start], minlength=problem.n_vertices)

@@ -9,12 +9,14 @@ import pytest
 import trimesh
 
 from calibration.bounds import ROUND_OFF
+from calibration.prior import smoothness_gram
+from calibration.unseen import weak_directions
 from reconstruct.optimise.mesh import adjacency, edges
 from reconstruct.optimise.pooling import PoolingSettings
 from reconstruct.optimise.problem_setup import build_problem, initial_reflectance
 from reconstruct.optimise.settings import OptimiseSettings
 from reconstruct.optimise.steps import optimise
-from reconstruct.optimise.synthetic import SyntheticScene, perturb
+from reconstruct.optimise.synthetic import SyntheticScene, make_scene, perturb
 from reconstruct.optimise.weights import edge_scale, photometric_weights, tap_weights
 from reconstruct.outputs.evaluate import surface_distance
 
@@ -78,6 +80,29 @@ def test_pooling_needs_the_reflectances_absolute_scale(scene: SyntheticScene) ->
         for r in (optimise(inp, cfg), optimise(replace(inp, reflectance_upper=np.inf), cfg))
     ]
     assert pooled[0] > 0 and pooled[1] == 0
+
+
+def test_barely_seen_spectral_directions_are_the_regularisers() -> None:
+    """Three illuminations see the eighth basis direction barely: after the solve it is set by
+    the spectral regulariser, not by the noise (calibration/unseen.py)."""
+    three = ("LED1", "LED2", "LED3")
+    scene = make_scene(subdivisions=2, n_views=6, illuminations=three, noise=0.01)
+    weak = weak_directions(scene.basis.B, scene.rig.responses, 0.003)
+    assert weak.shape[1] == 1
+    P = smoothness_gram(scene.basis.B)
+    cfg = OptimiseSettings(
+        outer_iterations=1, joint_iterations=3, pooling=PoolingSettings(max_fold_deg=0.0)
+    )
+    inp = scene.input(scene.vertices)
+    results = [optimise(inp, replace(cfg, weakly_seen_share=s)) for s in (0.0, 0.003)]
+    reflectance = [scene.basis.reconstruct(r.alpha) for r in results]
+    inside = np.all((reflectance[1] > 1e-6) & (reflectance[1] < 1 - 1e-6), axis=1)
+    pull = [np.abs(r.alpha[inside] @ P @ weak).max() for r in results]
+    assert pull[1] < 1e-6 * pull[0]  # the regulariser's minimum along it
+    rows = np.einsum("knl,lb->knb", scene.rig.responses, scene.basis.B).reshape(-1, 8)
+    colours = [r.alpha @ rows.T for r in results]
+    # the colours move by what that direction adds to them: a small share of the full scale
+    assert np.abs(colours[1] - colours[0]).max() < 1e-3 * np.abs(colours[0]).max()
 
 
 def test_light_stage_on_images_finds_the_offset(image_scene: SyntheticScene) -> None:
