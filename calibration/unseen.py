@@ -35,6 +35,8 @@ from calibration.bounds import bounded_quadratic
 # whose completion meets a bound (the others are completed exactly): far beyond any curvature
 # the regulariser has, so what the camera sees well stays as it was fitted.
 HOLD = 1e6
+# A direction seen at this share of the strongest or less is round-off: not seen at all.
+UNSEEN_SHARE = 1e-9
 
 
 def weak_directions(B: np.ndarray, responses: np.ndarray, share: float) -> np.ndarray:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from dataclasses import replace
 
 import numpy as np
@@ -82,9 +83,11 @@ def test_pooling_needs_the_reflectances_absolute_scale(scene: SyntheticScene) ->
     assert pooled[0] > 0 and pooled[1] == 0
 
 
-def test_barely_seen_spectral_directions_are_the_regularisers() -> None:
+def test_barely_seen_spectral_directions_are_the_regularisers(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
     """Three illuminations see the eighth basis direction barely: after the solve it is set by
-    the spectral regulariser, not by the noise (calibration/unseen.py)."""
+    the spectral regulariser, not by the noise (calibration/unseen.py), and the log says so."""
     three = ("LED1", "LED2", "LED3")
     scene = make_scene(subdivisions=2, n_views=6, illuminations=three, noise=0.01)
     weak = weak_directions(scene.basis.B, scene.rig.responses, 0.003)
@@ -94,7 +97,11 @@ def test_barely_seen_spectral_directions_are_the_regularisers() -> None:
         outer_iterations=1, joint_iterations=3, pooling=PoolingSettings(max_fold_deg=0.0)
     )
     inp = scene.input(scene.vertices)
-    results = [optimise(inp, replace(cfg, weakly_seen_share=s)) for s in (0.0, 0.003)]
+    with caplog.at_level(logging.INFO, logger="reconstruct.optimise.steps"):
+        results = [optimise(inp, replace(cfg, weakly_seen_share=s)) for s in (0.0, 0.003)]
+    assert "1 of 8 spectral directions set by the regulariser: 0 unseen, 1 seen below 0.003" in (
+        caplog.text
+    )
     reflectance = [scene.basis.reconstruct(r.alpha) for r in results]
     inside = np.all((reflectance[1] > 1e-6) & (reflectance[1] < 1 - 1e-6), axis=1)
     pull = [np.abs(r.alpha[inside] @ P @ weak).max() for r in results]
