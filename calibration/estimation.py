@@ -55,6 +55,12 @@ def response_matrices(camera: np.ndarray, spds: list[np.ndarray] | np.ndarray) -
     return np.einsum("ln,kl->knl", c, lights)
 
 
+def stacked_responses(resp: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """The responses (K, 3, N_λ) on basis weights, the K RGB rows stacked: ``(3K, N_b)``, so
+    that ``stacked_responses(resp, B) @ α`` is the K RGB triples of ``B α`` at unit shading."""
+    return (resp @ B).reshape(-1, B.shape[1])
+
+
 def _check(rgb: np.ndarray, resp: np.ndarray, basis: SpectralBasis) -> None:
     if resp.ndim != 3 or resp.shape[1] != 3 or resp.shape[2] != basis.B.shape[0]:
         raise RigError(
@@ -78,7 +84,7 @@ def normal_equations(
     by ``lhs α = mᵀ y`` with y the K RGB triples stacked; ``regulariser`` (default: smoothness)
     weighted by ``smoothness`` relative to the data."""
     reg = regulariser or spectral_regulariser("smoothness", basis)
-    m = (resp @ basis.B).reshape(-1, basis.n_components)  # (3K, N_b)
+    m = stacked_responses(resp, basis.B)
     gram = m.T @ m
     lam = smoothness * np.trace(gram) / np.trace(smoothness_gram(basis.B))
     lhs = gram + lam * reg.matrix + 1e-12 * np.trace(gram) * np.eye(gram.shape[0])

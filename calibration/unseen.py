@@ -12,13 +12,14 @@ would set an unseen one: the smallest ``αᵀ P α`` within the bounds, what the
 held (truncated-SVD regularisation of the weak directions).
 
 >>> from calibration.basis import default_basis
+>>> from calibration.estimation import stacked_responses
 >>> from calibration.prior import smoothness_gram
 >>> basis = default_basis(); B = basis.B; P = smoothness_gram(B)
 >>> responses = np.abs(np.random.default_rng(0).normal(size=(2, 3, B.shape[0])))  # two lamps
 >>> smooth = basis.project(np.linspace(0.2, 0.6, B.shape[0]))
 >>> rough = smooth + 0.2 * weak_directions(B, responses, 0.003)[:, 0]  # a wave nothing sees
 >>> done = complete_unseen(rough[None], B, responses, P, share=0.003)[0]
->>> Q = np.einsum("knl,lb->knb", responses, B).reshape(-1, B.shape[1])
+>>> Q = stacked_responses(responses, B)
 >>> bool(np.allclose(Q @ done, Q @ rough))  # the colours are as fitted
 True
 >>> bool(done @ P @ done < rough @ P @ rough)  # the spectrum is smoother
@@ -30,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from calibration.bounds import bounded_quadratic
+from calibration.estimation import stacked_responses
 
 # How hard the strongly seen part is held, relative to the regulariser's scale, in the rows
 # whose completion meets a bound (the others are completed exactly): far beyond any curvature
@@ -37,6 +39,27 @@ from calibration.bounds import bounded_quadratic
 HOLD = 1e6
 # A direction seen at this share of the strongest or less is round-off: not seen at all.
 UNSEEN_SHARE = 1e-9
+
+
+def _directions(B: np.ndarray, responses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each basis-weight direction (rows of an orthonormal (N_b, N_b)) with how strongly the
+    stacked responses see it, relative to the strongest (N_b,; 0 for the unseen ones)."""
+    rows = stacked_responses(np.asarray(responses, dtype=float), B)
+    _, sv, vt = np.linalg.svd(rows, full_matrices=True)
+    strength = np.zeros(B.shape[1])
+    strength[: sv.size] = sv / sv[0]
+    return strength, vt
+
+
+def seen_strengths(B: np.ndarray, responses: np.ndarray) -> np.ndarray:
+    """How strongly the responses (K, 3, N_λ) see each basis-weight direction, relative to the
+    strongest, in decreasing order (N_b,).
+
+    >>> B = np.eye(3); Q = np.array([[[1.0, 0.0, 0.0], [0.0, 1e-4, 0.0], [0.0, 0.0, 0.0]]])
+    >>> seen_strengths(B, Q).tolist()
+    [1.0, 0.0001, 0.0]
+    """
+    return _directions(B, responses)[0]
 
 
 def weak_directions(B: np.ndarray, responses: np.ndarray, share: float) -> np.ndarray:
@@ -47,10 +70,7 @@ def weak_directions(B: np.ndarray, responses: np.ndarray, share: float) -> np.nd
     >>> weak_directions(B, Q, 0.003).shape
     (3, 2)
     """
-    rows = np.einsum("knl,lb->knb", np.asarray(responses, dtype=float), B).reshape(-1, B.shape[1])
-    _, sv, vt = np.linalg.svd(rows, full_matrices=True)
-    strength = np.zeros(B.shape[1])
-    strength[: sv.size] = sv / sv[0]
+    strength, vt = _directions(B, responses)
     weak: np.ndarray = vt[strength < share].T
     return weak
 

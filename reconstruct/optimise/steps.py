@@ -19,7 +19,7 @@ import numpy as np
 
 from calibration.bounds import project
 from calibration.prior import spectral_regulariser
-from calibration.unseen import UNSEEN_SHARE, complete_unseen, weak_directions
+from calibration.unseen import UNSEEN_SHARE, complete_unseen, seen_strengths
 from core.errors import RigError
 from reconstruct.optimise.checkpoint import Checkpoint, OptimiseState
 from reconstruct.optimise.cost import JointCost
@@ -369,8 +369,8 @@ def optimise(
     spectral = problem.weights.spectral or spectral_regulariser("smoothness", inp.basis)
     share = cfg.weakly_seen_share
     A = complete_unseen(A, B, inp.rig.responses, spectral.matrix, share, 0.0, upper)
-    weak = weak_directions(B, inp.rig.responses, share).shape[1]
-    unseen = weak_directions(B, inp.rig.responses, UNSEEN_SHARE).shape[1]
+    strength = seen_strengths(B, inp.rig.responses)
+    weak, unseen = int(np.sum(strength < share)), int(np.sum(strength < UNSEEN_SHARE))
     log.info(
         "%d of %d spectral directions set by the regulariser: %d unseen, %d seen below %.2g of "
         "the strongest", weak, B.shape[1], unseen, weak - unseen, share

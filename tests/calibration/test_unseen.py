@@ -7,6 +7,7 @@ import numpy as np
 from calibration.basis import default_basis
 from calibration.bounds import ROUND_OFF
 from calibration.defaults import training_reflectances
+from calibration.estimation import stacked_responses
 from calibration.prior import smoothness_gram
 from calibration.unseen import complete_unseen, weak_directions
 from reconstruct.optimise.synthetic import default_responses
@@ -14,10 +15,6 @@ from reconstruct.optimise.synthetic import default_responses
 BASIS = default_basis()
 B = BASIS.B
 P = smoothness_gram(B)
-
-
-def seen_rows(responses: np.ndarray) -> np.ndarray:
-    return np.einsum("knl,lb->knb", responses, B).reshape(-1, B.shape[1])
 
 
 def test_weak_directions_are_those_seen_below_the_share() -> None:
@@ -28,7 +25,7 @@ def test_weak_directions_are_those_seen_below_the_share() -> None:
     weak = weak_directions(B, three, 0.003)
     assert weak.shape == (8, 1)  # the built-in bulb's three settings see the eighth barely
     assert np.allclose(weak.T @ weak, np.eye(1))
-    rows = seen_rows(three)
+    rows = stacked_responses(three, B)
     strongest = np.linalg.norm(rows, ord=2)
     assert np.linalg.norm(rows @ weak) < 0.003 * strongest
 
@@ -39,7 +36,7 @@ def test_the_unseen_part_is_the_regularisers_minimum_and_the_colours_stay() -> N
     truth = BASIS.project(training_reflectances()[:20])
     rough = truth + 0.15 * np.sin(np.arange(20))[:, None] * weak[:, 0]
     done = complete_unseen(rough, B, responses, P, 0.003)
-    rows = seen_rows(responses)
+    rows = stacked_responses(responses, B)
     assert np.allclose(done @ rows.T, rough @ rows.T, atol=1e-9)
     for a, d in zip(rough, done, strict=True):
         r = B @ d
@@ -54,7 +51,7 @@ def test_a_barely_seen_direction_follows_the_regulariser_not_the_noise() -> None
     # it out and leaves the colours as fitted.
     rng = np.random.default_rng(1)
     responses = default_responses(("LED1", "LED2", "LED3"))
-    rows = seen_rows(responses)
+    rows = stacked_responses(responses, B)
     truth = training_reflectances()[rng.choice(214, 200, replace=False)]
     rgb = BASIS.project(truth) @ rows.T
     noisy = rgb * (1 + 0.01 * rng.standard_normal(rgb.shape))
@@ -76,7 +73,7 @@ def test_the_completion_stays_within_the_bounds() -> None:
     done = complete_unseen(dark, B, responses, P, 0.003)
     r = done @ B.T
     assert r.min() >= -ROUND_OFF and r.max() <= 1 + ROUND_OFF
-    rows = seen_rows(responses)
+    rows = stacked_responses(responses, B)
     assert np.allclose(done @ rows.T, dark @ rows.T, rtol=1e-4, atol=1e-9)
     inside = (free @ B.T).min(axis=1) >= -ROUND_OFF
     assert np.array_equal(done[inside], free[inside])  # rows the bounds leave free: exact
@@ -86,3 +83,11 @@ def test_share_zero_changes_nothing() -> None:
     responses = default_responses(("LED1", "LED2", "LED3"))
     alpha = BASIS.project(training_reflectances()[:5])
     assert np.array_equal(complete_unseen(alpha, B, responses, P, 0.0), alpha)
+
+
+def test_the_modules_examples_hold() -> None:
+    import doctest
+
+    import calibration.unseen
+
+    assert doctest.testmod(calibration.unseen).failed == 0

@@ -10,6 +10,7 @@ import pytest
 import trimesh
 
 from calibration.bounds import ROUND_OFF
+from calibration.estimation import stacked_responses
 from calibration.prior import smoothness_gram
 from calibration.unseen import weak_directions
 from reconstruct.optimise.mesh import adjacency, edges
@@ -106,7 +107,7 @@ def test_barely_seen_spectral_directions_are_the_regularisers(
     inside = np.all((reflectance[1] > 1e-6) & (reflectance[1] < 1 - 1e-6), axis=1)
     pull = [np.abs(r.alpha[inside] @ P @ weak).max() for r in results]
     assert pull[1] < 1e-6 * pull[0]  # the regulariser's minimum along it
-    rows = np.einsum("knl,lb->knb", scene.rig.responses, scene.basis.B).reshape(-1, 8)
+    rows = stacked_responses(scene.rig.responses, scene.basis.B)
     colours = [r.alpha @ rows.T for r in results]
     # the colours move by what that direction adds to them: a small share of the full scale
     assert np.abs(colours[1] - colours[0]).max() < 1e-3 * np.abs(colours[0]).max()
