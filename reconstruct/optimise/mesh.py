@@ -151,3 +151,41 @@ def relax_tangentially(
         towards -= np.einsum("ij,ij->i", towards, normals)[:, None] * normals
         X[free] += step * towards[free]
     return X
+
+
+def carried_along(
+    displacement: np.ndarray, faces: np.ndarray, moved: np.ndarray
+) -> np.ndarray:
+    """``displacement`` (N, 3) with the rows of the vertices not ``moved`` replaced by the
+    harmonic extension of the moved ones' (each the mean of its 1-ring's).
+
+    A vertex without enough views to move on its own is still part of the surface around it:
+    where a blob of the initial mesh turned its normals away from most views, its middle sees
+    too few to move while its rim follows the data, and left behind it stays a pit. Vertices
+    in a part of the mesh with no moved vertex keep their own displacement.
+
+    >>> faces = np.array([[0, 1, 2], [1, 3, 2]])
+    >>> d = np.array([[0.0, 0, 1], [0, 0, 1], [0, 0, 0], [0, 0, 1]])
+    >>> carried_along(d, faces, np.array([True, True, False, True]))[2].tolist()
+    [0.0, 0.0, 1.0]
+    """
+    d = np.array(displacement, dtype=float)
+    adj = adjacency(faces, len(d))
+    held = np.flatnonzero(~moved)
+    if held.size == 0 or not moved.any():
+        return d
+    degree = np.asarray(adj.sum(axis=1)).ravel()
+    inner = sp.csr_array(adj[held][:, held])
+    # the held parts touching no moved vertex are left out (their Laplacian is singular)
+    n_parts, part = sp.csgraph.connected_components(inner, directed=False)
+    touching = np.zeros(n_parts, dtype=bool)
+    touching[part[np.flatnonzero(adj[held][:, np.flatnonzero(moved)].sum(axis=1))]] = True
+    solve = held[touching[part]]
+    if solve.size == 0:
+        return d
+    laplacian = sp.diags_array(degree[solve]) - adj[solve][:, solve]
+    rhs = adj[solve][:, moved] @ d[moved]
+    d[solve] = np.column_stack(
+        [sp.linalg.spsolve(sp.csc_array(laplacian), rhs[:, k]) for k in range(3)]
+    )
+    return d

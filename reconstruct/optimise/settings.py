@@ -75,8 +75,9 @@ class OptimiseSettings:
     optimise_positions: bool = True
     # Runaway guard: per joint stage a vertex moves at most ``max_step_edges`` of its local mean
     # edge length, and at most ``max_total_edges`` (initial mesh's edges) from the initial mesh;
-    # vertices seen (at non-grazing angles) from fewer than ``min_views`` views keep their
-    # positions. One or two corrupted views otherwise pull silhouette vertices into spikes.
+    # vertices seen (at non-grazing angles) from fewer than ``min_views`` views do not follow
+    # their own data but the surface around them (``mesh.carried_along``). One or two
+    # corrupted views otherwise pull silhouette vertices into spikes.
     # The stage cap is as wide as the total one: a tighter cap clamps many vertices of a
     # dense start from the first step, and LM's steps then no longer fit the clamped problem.
     max_step_edges: float = bounded(2.0, min=0.0, max=1e6)

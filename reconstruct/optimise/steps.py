@@ -24,7 +24,12 @@ from core.errors import RigError
 from reconstruct.optimise.checkpoint import Checkpoint, OptimiseState
 from reconstruct.optimise.cost import JointCost
 from reconstruct.optimise.gloss import GlossFit, colour_without_gloss, without_gloss
-from reconstruct.optimise.mesh import adjacency, relax_tangentially, vertex_normals
+from reconstruct.optimise.mesh import (
+    adjacency,
+    carried_along,
+    relax_tangentially,
+    vertex_normals,
+)
 from reconstruct.optimise.pooling import pooled_sources
 from reconstruct.optimise.problem import Problem
 from reconstruct.optimise.problem_setup import (
@@ -298,8 +303,9 @@ def optimise(
             problem, gloss = without_gloss(problem, theta)
         seconds["shadows"] = seconds.get("shadows", 0.0) + time.perf_counter() - t0
         # Vertices no view observes have no data term: only the geometric term (blind to
-        # tangential motion) would move them, so they keep their positions; so do vertices
-        # seen from too few views (no parallax, one bad view decides).
+        # tangential motion) would move them, so the solve holds them; so it does vertices
+        # seen from too few views (no parallax, one bad view decides). After the stage they
+        # are carried along with the surface around them.
         o = problem.obs
         views = np.bincount(o.vertex[o.pair_start], minlength=problem.n_vertices)
         mask = problem.mask(True, True, free_light)
@@ -327,9 +333,12 @@ def optimise(
         )
         X_new, A_new, light_new = problem.unpack(theta)
         moved = float(np.max(np.linalg.norm(X_new - X_prev, axis=1)))
-        # what the stage moved along the normals, evened out along the surface (within the
-        # same bounds as the stage's own steps)
-        X_even = relax_tangentially(X_new, problem.faces, views >= max(cfg.min_views, 1))
+        # the vertices held for want of views carried along with the surface around them,
+        # then what the stage moved along the normals evened out along the surface (within
+        # the same bounds as the stage's own steps)
+        movable = views >= max(cfg.min_views, 1)
+        X_new = X_prev + carried_along(X_new - X_prev, problem.faces, movable)
+        X_even = relax_tangentially(X_new, problem.faces, movable)
         theta = within_reach(problem.pack(X_even, A_new, light_new))
         light_moved = float(np.max(np.linalg.norm(light_new - light_prev, axis=1)))
         tol = cfg.settle_position * float(np.mean(problem.weights.scale))

@@ -1,4 +1,5 @@
-"""Vertex normals and their Jacobian, adjacency, tangential relaxation."""
+"""Vertex normals and their Jacobian, adjacency, tangential relaxation, held vertices carried
+along."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from reconstruct.optimise.mesh import (
     NormalJacobian,
     adjacency,
     boundary_vertices,
+    carried_along,
     edges,
     normal_jacobian,
     relax_tangentially,
@@ -113,3 +115,37 @@ def test_relaxation_moves_only_movable_vertices_off_the_boundary() -> None:
     still = rim | ~movable
     np.testing.assert_array_equal(relaxed[still], X[still])
     assert np.abs(relaxed[~still] - X[~still]).max() > 1e-4
+
+
+def test_held_vertices_are_carried_along_with_the_surface_around_them() -> None:
+    """A pit in a sphere whose middle is held: its rim moves out to the sphere, and the middle
+    follows as the rim's harmonic extension instead of staying a pit; a held part of the mesh
+    that touches no moved vertex keeps its own displacement, moved vertices keep theirs."""
+    sphere = trimesh.creation.icosphere(4)
+    X = np.asarray(sphere.vertices, dtype=float)
+    pit = X[:, 2] > 0.9
+    middle = X[:, 2] > 0.95
+    start = X.copy()
+    start[pit] *= 0.9
+    target = X - start  # what the data would move each vertex by
+    moved = ~middle
+    d = carried_along(np.where(moved[:, None], target, 0.0), sphere.faces, moved)
+    np.testing.assert_array_equal(d[moved], target[moved])
+    end = start + d
+    assert np.abs(np.linalg.norm(end[middle], axis=1) - 1.0).max() < 0.01  # was 0.1 deep
+    lonely = trimesh.Trimesh(X[sphere.faces[0]] + 5.0, [[0, 1, 2]])
+    both = trimesh.util.concatenate([sphere, lonely])
+    own = np.zeros((len(both.vertices), 3))
+    own[-3:] = 0.5
+    moved_both = np.r_[np.ones(len(X), bool), np.zeros(3, bool)]
+    np.testing.assert_array_equal(
+        carried_along(own, both.faces, moved_both)[-3:], own[-3:]
+    )
+
+
+def test_examples_in_the_docstrings_run() -> None:
+    import doctest
+
+    import reconstruct.optimise.mesh
+
+    assert doctest.testmod(reconstruct.optimise.mesh).failed == 0

@@ -1,5 +1,5 @@
 """Runaway guard: corrupted observations cannot drag vertices beyond the motion caps, and
-vertices seen from too few views keep their positions."""
+vertices seen from too few views move only with the surface around them."""
 
 from __future__ import annotations
 
@@ -68,17 +68,30 @@ def test_total_motion_is_capped_from_the_initial_mesh(
     assert moved_edges(inp, edge, cfg).max() <= 0.75 + 1e-9
 
 
-def test_vertices_seen_from_one_view_keep_their_positions(
+def test_vertices_seen_from_one_view_move_with_their_neighbours(
     corrupted: tuple[OptimiseInput, np.ndarray],
 ) -> None:
-    inp, _ = corrupted
+    """A vertex seen from one view has no parallax: its one (here 4× too bright) view does
+    not move it; the surface around it carries it along (by about its 1-ring's motion)."""
+    inp, edge = corrupted
     vis = inp.visibility.copy()
     counts = vis.sum(axis=1)
-    lonely = np.flatnonzero(counts >= 2)[:30]
+    adj = adjacency(inp.faces, len(inp.vertices))
+    lonely: list[int] = []
+    for v in np.flatnonzero(counts >= 2):  # 30 vertices, none in another's 1-ring
+        if len(lonely) < 30 and not any(adj[[v]][:, lonely].toarray().ravel()):
+            lonely.append(int(v))
+    assert inp.observed is not None
+    obs = inp.observed.copy()
     for v in lonely:
-        vis[v, np.flatnonzero(vis[v])[1:]] = False  # keep only its first view
-    one_view = OptimiseInput(**{**inp.__dict__, "visibility": vis})
+        _, *rest = np.flatnonzero(vis[v])
+        vis[v, rest] = False
+        obs[v, :] *= 4.0
+    one_view = OptimiseInput(**{**inp.__dict__, "visibility": vis, "observed": obs})
     cfg = OptimiseSettings(outer_iterations=1, light_iterations=3, joint_iterations=5)
     res = optimise(one_view, cfg)
-    assert np.array_equal(res.vertices[lonely], inp.vertices[lonely])
-    assert not np.array_equal(res.vertices, inp.vertices)
+    d = res.vertices - inp.vertices
+    ring = (adj @ d) / np.asarray(adj.sum(axis=1)).reshape(-1, 1)
+    off = np.linalg.norm(d[lonely] - ring[lonely], axis=1) / edge[lonely]
+    assert np.linalg.norm(d[lonely], axis=1).max() > 0  # carried, not pinned
+    assert off.max() < 0.1
