@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+from scipy.sparse.linalg import splu
 
 from reconstruct.optimise.kernels.normals import face_normal_sums, normal_jacobian_blocks
 
@@ -170,22 +172,21 @@ def carried_along(
     [0.0, 0.0, 1.0]
     """
     d = np.array(displacement, dtype=float)
-    adj = adjacency(faces, len(d))
     held = np.flatnonzero(~moved)
     if held.size == 0 or not moved.any():
         return d
-    degree = np.asarray(adj.sum(axis=1)).ravel()
-    inner = sp.csr_array(adj[held][:, held])
-    # the held parts touching no moved vertex are left out (their Laplacian is singular)
-    n_parts, part = sp.csgraph.connected_components(inner, directed=False)
+    adj = adjacency(faces, len(d))
+    rows = adj[held]
+    inner, to_moved = rows[:, held], rows[:, moved]
+    # only held parts that touch a moved vertex are solved for (elsewhere the Laplacian is
+    # singular)
+    n_parts, part = connected_components(inner, directed=False)
     touching = np.zeros(n_parts, dtype=bool)
-    touching[part[np.flatnonzero(adj[held][:, np.flatnonzero(moved)].sum(axis=1))]] = True
-    solve = held[touching[part]]
-    if solve.size == 0:
+    touching[part[to_moved.sum(axis=1) > 0]] = True
+    solve = touching[part]
+    if not solve.any():
         return d
-    laplacian = sp.diags_array(degree[solve]) - adj[solve][:, solve]
-    rhs = adj[solve][:, moved] @ d[moved]
-    d[solve] = np.column_stack(
-        [sp.linalg.spsolve(sp.csc_array(laplacian), rhs[:, k]) for k in range(3)]
-    )
+    degree = np.asarray(rows.sum(axis=1)).ravel()[solve]
+    laplacian = sp.diags_array(degree) - inner[solve][:, solve]
+    d[held[solve]] = splu(sp.csc_array(laplacian)).solve(to_moved[solve] @ d[moved])
     return d
