@@ -30,7 +30,7 @@ from reconstruct.geometry import subdivide, visibility
 from reconstruct.geometry.subdivide import SubdivideConfig
 from reconstruct.geometry.visibility import Visibility, VisibilityConfig
 from reconstruct.initial_mesh import stage as initial_mesh
-from reconstruct.initial_mesh.dense.mirror import GLOSSY_MIRROR_DEG
+from reconstruct.initial_mesh.dense.mirror import GLOSSY_MIRROR_DEG, MIN_VIEWS
 from reconstruct.initial_mesh.dense.poisson import read_mesh
 from reconstruct.initial_mesh.procam import (
     LIGHTS,
@@ -163,12 +163,16 @@ def _patchmatch_scale(conf: MeshConfig, levels: StageLevels) -> MeshConfig:
     return replace(conf, patchmatch=replace(conf.patchmatch, scale=levels.patchmatch_scale))
 
 
-def _mirror(conf: MeshConfig, glossy: bool) -> MeshConfig:
-    """Highlights left out of fusion on an object declared glossy, unless the config names
-    the angle."""
+def _mirror(conf: MeshConfig, glossy: bool, views: int) -> MeshConfig:
+    """Highlights left out of fusion on an object declared glossy and seen from enough views,
+    unless the config names the angle."""
     if conf.patchmatch.mirror_deg is not None:
         return conf
-    angle = GLOSSY_MIRROR_DEG if glossy else 0.0
+    if glossy and views < MIN_VIEWS:
+        log.info("glossy object seen from %d views: highlights stay in fusion (leaving them out "
+                 "costs more than them below %d views; mesh.patchmatch.mirror_deg forces it)",
+                 views, MIN_VIEWS)
+    angle = GLOSSY_MIRROR_DEG if glossy and views >= MIN_VIEWS else 0.0
     return replace(conf, patchmatch=replace(conf.patchmatch, mirror_deg=angle))
 
 
@@ -213,7 +217,7 @@ def run_front(
             else:
                 mesh_conf = _mesh_config(conf.mesh, session, posed.summary)
                 mesh0 = initial_mesh.run(
-                    _mirror(_patchmatch_scale(mesh_conf, levels), glossy),
+                    _mirror(_patchmatch_scale(mesh_conf, levels), glossy, len(posed.poses)),
                     dirs["decoded"],
                     dirs["poses"], dirs["mesh"], initial_mesh_file, posed,
                     # the paper's start where the profile names no mount: the lamp at the lens

@@ -5,11 +5,14 @@ lamp and to the camera. The lamp rides on the camera, so that highlight moves ac
 surface from view to view: PatchMatch matches the moving highlight instead of the paint and
 puts such pixels millimetres off, and neighbouring views' wrong depths can confirm each other.
 Which pixels those are follows from the geometry alone: a first surface from all the fused
-points (whose normals are right even where a blob displaces it) gives each pixel's normal,
-and pixels within ``max_deg`` of the mirror direction are dropped before fusing again. The
-views that see the same surface obliquely keep it. Concavities are seen head-on, though,
+points gives each pixel's normal, and pixels within ``max_deg`` of the mirror direction are
+dropped before fusing again. Where that surface has a blob, the blob is a pit whose walls
+tilt its normals away from the mirror direction; the walls tilt opposite ways, so the
+normals averaged over a patch wider than the pit are the surface's underneath, and a pixel
+is dropped when either normal puts it near the mirror direction. The views that see the
+same surface obliquely keep it. Concavities are seen head-on, though,
 and with few views the head-on depths are much of what fusion confirms, so the pass runs by
-default only for objects declared glossy.
+default only for objects declared glossy and seen from at least ``MIN_VIEWS`` views.
 """
 
 from __future__ import annotations
@@ -28,6 +31,31 @@ from reconstruct.model.raycast import RayCaster
 # the angle a glossy object's pixels are left out within (GGX α 0.2: the lobe is down to about
 # a fifteenth of its peak there)
 GLOSSY_MIRROR_DEG = 20.0
+# fewer views than this and the pass costs a glossy object more than the highlights do
+MIN_VIEWS = 24
+# the patch the normals are also averaged over, as a fraction of the surface's longest side
+# (a highlight's blob on a 20 cm object is a few millimetres across)
+AVERAGE_FRACTION = 1 / 24
+
+
+def averaged_face_normals(surface: trimesh.Trimesh, radius: float) -> np.ndarray:
+    """The face normals (F, 3) of ``surface``'s vertex normals averaged over about ``radius``
+    (metres): repeated 1-ring means, a diffusion whose reach grows as the edge length times
+    the square root of the number of steps.
+
+    >>> sphere = trimesh.creation.icosphere(subdivisions=3)
+    >>> n = averaged_face_normals(sphere, 0.3)
+    >>> bool(np.all(np.einsum("ij,ij->i", n, sphere.face_normals) > 0.99))
+    True
+    """
+    edge = float(np.mean(surface.edges_unique_length))
+    steps = int(np.ceil((radius / edge) ** 2))
+    ring_mean = trimesh.smoothing.laplacian_calculation(surface).tocsr()
+    normals = np.array(surface.vertex_normals, dtype=float)
+    for _ in range(steps):
+        normals = ring_mean @ normals
+    face = normals[np.asarray(surface.faces)].sum(axis=1)
+    return face / np.linalg.norm(face, axis=1, keepdims=True)
 
 
 def without_near_mirror(
@@ -36,13 +64,19 @@ def without_near_mirror(
     light_offset: np.ndarray,
     surface: trimesh.Trimesh,
     max_deg: float,
+    average_fraction: float = AVERAGE_FRACTION,
 ) -> tuple[dict[int, ViewDepth], int]:
     """Each view's depth map with the pixels dropped (NaN) whose ray meets ``surface`` where
-    its normal lies within ``max_deg`` of the half-vector of the directions to the camera and
-    to the light at ``light_offset`` (camera frame, metres, as ``light_mount.offset_m``), and
-    how many pixels were dropped. Pixels whose ray misses ``surface`` are kept."""
+    its normal, or that normal averaged over ``average_fraction`` of the surface's longest side
+    around it, lies within ``max_deg`` of the half-vector of the directions to the camera and to the
+    light at ``light_offset`` (camera frame, metres, as ``light_mount.offset_m``), and how
+    many pixels were dropped. Pixels whose ray misses ``surface`` are kept."""
     caster = RayCaster(np.asarray(surface.vertices), np.asarray(surface.faces))
-    face_normals = np.asarray(surface.face_normals)
+    normals = [np.asarray(surface.face_normals)]
+    if average_fraction > 0:
+        radius = average_fraction * float(max(surface.extents))
+        normals.append(averaged_face_normals(surface, radius))
+    limit = np.radians(max_deg)
     out: dict[int, ViewDepth] = {}
     dropped = 0
     for view, vd in maps.items():
@@ -53,13 +87,11 @@ def without_near_mirror(
         hit = tri >= 0
         points = pose.center + rays[hit] * distance[hit, None]
         n = len(points)
-        angle = half_angles(
-            points,
-            face_normals[tri[hit]],
-            np.broadcast_to(pose.light_position(light_offset), (n, 3)),
-            np.broadcast_to(pose.center, (n, 3)),
-        )
-        near = angle < np.radians(max_deg)
+        lights = np.broadcast_to(pose.light_position(light_offset), (n, 3))
+        cameras = np.broadcast_to(pose.center, (n, 3))
+        near = np.zeros(n, dtype=bool)
+        for face_normals in normals:
+            near |= half_angles(points, face_normals[tri[hit]], lights, cameras) < limit
         depth = vd.distance.copy()
         depth[rows[hit][near], cols[hit][near]] = np.nan
         dropped += int(near.sum())

@@ -59,7 +59,8 @@ class PatchMatchConfig:
     ``min_consistent``: views that must confirm a point; ``mirror_deg``: pixels whose surface
     normal lies within this angle of the lamp's mirror direction are left out of a second
     fusion (:mod:`reconstruct.initial_mesh.dense.mirror`; 0: fuse once; unset: 20 when the
-    optimiser is told the object is glossy, else 0); ``seed``: random hypotheses."""
+    optimiser is told the object is glossy and there are at least 24 views, else 0);
+    ``seed``: random hypotheses."""
 
     scale: float | None = bounded(None, above=0.0, max=1.0)
     window: int = bounded(5, min=1, max=63)

@@ -65,3 +65,40 @@ def test_nothing_is_dropped_at_zero_degrees_or_where_rays_miss_the_surface(spher
     far.apply_translation([1.0, 0.0, 0.0])  # out of the view: every ray misses it
     maps, dropped = without_near_mirror({0: vd}, {0: pose}, np.zeros(3), far, 45.0)
     assert dropped == 0
+
+
+def test_a_pit_the_highlight_left_in_the_surface_is_judged_by_the_normals_around_it(
+    sphere_view,
+) -> None:
+    """PatchMatch puts a moving highlight behind a convex glaze: the first surface has a pit
+    there, whose walls tilt away from the mirror direction. The normals averaged over a patch
+    wider than the pit are the sphere's, so the highlight's pixels are dropped anyway."""
+    vd, pose, _ = sphere_view
+    offset = np.array([0.1, 0.0, 0.0])
+    light = pose.light_position(offset)
+    mirror = pose.center / np.linalg.norm(pose.center) + light / np.linalg.norm(light)
+    mirror /= np.linalg.norm(mirror)
+    pitted = trimesh.creation.icosphere(subdivisions=6, radius=RADIUS)
+    unit = np.asarray(pitted.vertices) / RADIUS
+    s = np.arccos(np.clip(unit @ mirror, -1.0, 1.0)) / np.radians(8.0)  # a pit 28 mm across
+    depth = np.where(s < 1.0, 0.016 * (1.0 - s**2) ** 2, 0.0)
+    pitted = trimesh.Trimesh(unit * (RADIUS - depth)[:, None], pitted.faces, process=False)
+    angle = _sphere_half_angles(vd, pose, light)
+    on_sphere = np.isfinite(vd.distance)
+    highlight, far = on_sphere & (angle < 15.0), on_sphere & (angle > 40.0)
+
+    inputs = {0: vd}, {0: pose}, offset, pitted, 20.0
+    walls, _ = without_near_mirror(*inputs, average_fraction=0.0)
+    assert np.isfinite(walls[0].distance[highlight]).mean() > 0.25  # by the pit's own normals
+    averaged, _ = without_near_mirror(*inputs, average_fraction=0.1)
+    assert not np.isfinite(averaged[0].distance[highlight]).any()
+    assert np.isfinite(averaged[0].distance[far]).all()
+
+
+def test_examples_in_the_docstrings_run() -> None:
+    import doctest
+
+    import reconstruct.initial_mesh.dense.mirror
+
+    result = doctest.testmod(reconstruct.initial_mesh.dense.mirror)
+    assert result.attempted > 0 and result.failed == 0

@@ -14,9 +14,12 @@ from front_synthetic import RADIUS, build_session, dented_sphere
 
 from core.errors import RigError
 from reconstruct.geometry.subdivide import sqrt3_step
+from reconstruct.initial_mesh.dense.mirror import GLOSSY_MIRROR_DEG, MIN_VIEWS
+from reconstruct.initial_mesh.dense.patchmatch import PatchMatchConfig
 from reconstruct.initial_mesh.dense.poisson import read_mesh
 from reconstruct.initial_mesh.repair import defects
-from reconstruct.run.front import FrontConfig, run_front
+from reconstruct.initial_mesh.stage import MeshConfig
+from reconstruct.run.front import FrontConfig, _mirror, run_front
 
 FAST = {"mesh": {"voxels": 64}}
 
@@ -138,17 +141,34 @@ def test_patchmatch_recovers_a_concavity_the_hull_cannot(tmp_path: Path) -> None
     assert errors["patchmatch"] < 0.5 * errors["visual_hull"]
     info = json.loads((result.recon_dir / "mesh" / "initial.json").read_text())
     assert "near_mirror_pixels" not in info  # a matte object is fused once
-    # a glossy one, declared so, is fused a second time without the pixels that saw the lamp
-    # (at the lens) mirrored: the dent, seen head-on, keeps most of its gain
+    # a glossy one, declared so, seen from 12 views is fused once too: the dent, seen head-on,
+    # keeps its gain; the second fusion without the pixels that saw the lamp (at the lens)
+    # mirrored runs when the config asks for it
     glossy = build_session(tmp_path / "glossy", views=12, illuminations=("white",),
                            size=(200, 150), mesh=truth, gloss=0.04)
     result = run_front(glossy, {"mesh": {"voxels": 64}}, glossy=True)
     info = json.loads((result.recon_dir / "mesh" / "initial.json").read_text())
-    assert info["near_mirror_pixels"] > 0
+    assert "near_mirror_pixels" not in info
     points = read_mesh(result.initial_mesh_path).sample(4000, seed=0)
     distance = np.abs(trimesh.proximity.signed_distance(truth, points))
-    print(f"glossy, highlights left out: {distance[points[:, 0] > 0.06].mean() * 1e3:.2f} mm")
+    print(f"glossy, fused once: {distance[points[:, 0] > 0.06].mean() * 1e3:.2f} mm")
     assert distance[points[:, 0] > 0.06].mean() < 0.5 * errors["visual_hull"]
+    result = run_front(glossy, {"mesh": {"voxels": 64, "patchmatch": {"mirror_deg": 20}}},
+                       glossy=True)
+    info = json.loads((result.recon_dir / "mesh" / "initial.json").read_text())
+    assert info["near_mirror_pixels"] > 0
+
+
+@pytest.mark.parametrize(
+    ("glossy", "views", "named", "angle"),
+    [(True, 40, None, GLOSSY_MIRROR_DEG), (True, MIN_VIEWS - 1, None, 0.0),
+     (False, 40, None, 0.0), (True, 12, 15.0, 15.0), (False, 40, 15.0, 15.0)],
+)
+def test_highlights_are_left_out_of_fusion_on_glossy_objects_seen_from_enough_views(
+    glossy: bool, views: int, named: float | None, angle: float
+) -> None:
+    conf = MeshConfig(patchmatch=PatchMatchConfig(mirror_deg=named))
+    assert _mirror(conf, glossy, views).patchmatch.mirror_deg == angle
 
 
 @pytest.mark.parametrize(
