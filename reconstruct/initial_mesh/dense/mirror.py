@@ -10,9 +10,9 @@ dropped before fusing again. Where that surface has a blob, the blob is a pit wh
 tilt its normals away from the mirror direction; the walls tilt opposite ways, so the
 normals averaged over a patch wider than the pit are the surface's underneath, and a pixel
 is dropped when either normal puts it near the mirror direction. The views that see the
-same surface obliquely keep it. Concavities are seen head-on, though,
-and with few views the head-on depths are much of what fusion confirms, so the pass runs by
-default only for objects declared glossy and seen from at least ``MIN_VIEWS`` views.
+same surface obliquely keep it. Concavities are seen head-on, though, and with few views the
+head-on depths are much of what fusion confirms, so the pass runs by default only for
+objects declared glossy and seen from at least ``MIN_VIEWS`` views.
 """
 
 from __future__ import annotations
@@ -67,10 +67,10 @@ def without_near_mirror(
     average_fraction: float = AVERAGE_FRACTION,
 ) -> tuple[dict[int, ViewDepth], int]:
     """Each view's depth map with the pixels dropped (NaN) whose ray meets ``surface`` where
-    its normal, or that normal averaged over ``average_fraction`` of the surface's longest side
-    around it, lies within ``max_deg`` of the half-vector of the directions to the camera and to the
-    light at ``light_offset`` (camera frame, metres, as ``light_mount.offset_m``), and how
-    many pixels were dropped. Pixels whose ray misses ``surface`` are kept."""
+    its normal, or that normal averaged over ``average_fraction`` of the surface's longest
+    side around it, lies within ``max_deg`` of the half-vector of the directions to the camera
+    and to the light at ``light_offset`` (camera frame, metres, as ``light_mount.offset_m``),
+    and how many pixels were dropped. Pixels whose ray misses ``surface`` are kept."""
     caster = RayCaster(np.asarray(surface.vertices), np.asarray(surface.faces))
     normals = [np.asarray(surface.face_normals)]
     if average_fraction > 0:
