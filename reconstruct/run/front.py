@@ -168,11 +168,12 @@ def _mirror(conf: MeshConfig, glossy: bool, views: int) -> MeshConfig:
     unless the config names the angle."""
     if conf.patchmatch.mirror_deg is not None:
         return conf
-    if glossy and views < MIN_VIEWS:
-        log.info("glossy object seen from %d views: highlights stay in fusion (leaving them out "
-                 "costs more than them below %d views; mesh.patchmatch.mirror_deg forces it)",
+    leave_out = glossy and views >= MIN_VIEWS
+    if glossy and not leave_out:
+        log.info("glossy object seen from %d views: highlights stay in fusion (below %d views "
+                 "leaving them out costs more than they do; mesh.patchmatch.mirror_deg forces it)",
                  views, MIN_VIEWS)
-    angle = GLOSSY_MIRROR_DEG if glossy and views >= MIN_VIEWS else 0.0
+    angle = GLOSSY_MIRROR_DEG if leave_out else 0.0
     return replace(conf, patchmatch=replace(conf.patchmatch, mirror_deg=angle))
 
 
