@@ -23,7 +23,7 @@ from typing import Any
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 # pycolmap's glog replaces the SIGTERM handler natively when this module loads, to print a
-# stack dump; the handlers are put back right after it.
+# stack dump; both signals wait while it loads and the handlers are put back before they land.
 NATIVE_HANDLER_MODULES = frozenset({"pycolmap._core"})
 
 Handler = Callable[[int, FrameType | None], Any] | int | None
@@ -223,8 +223,9 @@ def install(*, raising: bool = True) -> None:
 
 
 class _ReinstallAfter:
-    """A finder on ``sys.meta_path`` that puts the handlers back as soon as a module that
-    replaces them natively has loaded."""
+    """A finder on ``sys.meta_path`` that loads a module that replaces the handlers natively
+    with both signals blocked and puts the handlers back before unblocking them, so a signal
+    sent while it loads is taken by rig's handler, never by the module's."""
 
     def find_spec(
         self, fullname: str, path: Sequence[str] | None, target: ModuleType | None = None
@@ -237,11 +238,15 @@ class _ReinstallAfter:
         exec_module = spec.loader.exec_module
 
         def exec_then_reinstall(module: ModuleType) -> None:
+            main = _in_main_thread()
+            mask = signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS) if main else None
             try:
                 exec_module(module)
             finally:
-                if _in_main_thread() and signal.getsignal(signal.SIGTERM) is _handle:
+                if main and signal.getsignal(signal.SIGTERM) is _handle:
                     _set_handlers()
+                if mask is not None:
+                    signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
         spec.loader.exec_module = exec_then_reinstall  # type: ignore[method-assign]
         return spec

@@ -268,6 +268,30 @@ def test_pycolmap_native_sigterm_handler_is_replaced() -> None:
     assert "*** Aborted" not in proc.stderr and "received by PID" not in proc.stderr
 
 
+def test_a_sigterm_while_a_native_handler_module_loads_reaches_rig(tmp_path: Path) -> None:
+    """A module that, like pycolmap's, replaces the SIGTERM handler natively as it loads, with
+    the signal sent in that very instant: rig's handler takes it, not the module's."""
+    (tmp_path / "native_like.py").write_text(
+        "import ctypes, os, signal\n"
+        "libc = ctypes.CDLL(None)\n"
+        "libc.signal.argtypes = (ctypes.c_int, ctypes.c_void_p)\n"
+        "libc.signal(signal.SIGTERM, 0)  # SIG_DFL behind Python's back, as glog does\n"
+        "os.kill(os.getpid(), signal.SIGTERM)\n"
+    )
+    proc = python(
+        "import sys, time\n"
+        f"sys.path.insert(0, {str(tmp_path)!r})\n"
+        "from core import interrupts\n"
+        "interrupts.NATIVE_HANDLER_MODULES = frozenset({'native_like'})\n"
+        "interrupts.install()\n"
+        "try:\n"
+        "    import native_like; time.sleep(10)\n"
+        "except interrupts.Interrupted as stop:\n"
+        "    raise SystemExit(interrupts.exit_status(stop.signum))\n"
+    )
+    assert proc.returncode == 143, (proc.returncode, proc.stderr)
+
+
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 def test_outside_a_command_a_signal_exits_at_once_with_the_line(signum: int) -> None:
     proc = python(
