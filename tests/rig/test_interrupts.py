@@ -275,7 +275,7 @@ def test_a_sigterm_while_a_native_handler_module_loads_reaches_rig(tmp_path: Pat
         "import ctypes, os, signal\n"
         "libc = ctypes.CDLL(None)\n"
         "libc.signal.argtypes = (ctypes.c_int, ctypes.c_void_p)\n"
-        "libc.signal(signal.SIGTERM, 0)  # SIG_DFL behind Python's back, as glog does\n"
+        "libc.signal(signal.SIGTERM, 0)  # behind Python's back, as glog does (SIG_DFL here)\n"
         "os.kill(os.getpid(), signal.SIGTERM)\n"
     )
     proc = python(
