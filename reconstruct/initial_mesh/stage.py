@@ -32,12 +32,14 @@ from core.errors import RigError
 from core.files import write_bytes_atomically
 from reconstruct.frames.decode import INDEX, DecodeIndex, load_frame
 from reconstruct.initial_mesh.dense.board_silhouette import board_silhouette
+from reconstruct.initial_mesh.dense.bright_pixels import without_bright
 from reconstruct.initial_mesh.dense.mirror import without_near_mirror
 from reconstruct.initial_mesh.dense.patchmatch import (
     DenseResult,
     PatchMatchConfig,
     fuse,
     patchmatch_points,
+    working_images,
 )
 from reconstruct.initial_mesh.dense.poisson import poisson_mesh, read_mesh
 from reconstruct.initial_mesh.dense.silhouette import silhouette
@@ -285,17 +287,27 @@ def dense_mesh(
                 "hull_points_kept": len(hp), "vertices_clipped_to_hull": moved}
 
         surface, stereo_info = stereo_surface(dense)
-        if surface is not None and conf.patchmatch.mirror_deg and light_offset is not None:
-            # fuse again without the pixels this first surface says saw a highlight
-            maps, dropped = without_near_mirror(
-                dense.maps, poses, light_offset, surface, conf.patchmatch.mirror_deg
-            )
-            log.info("PatchMatch: %d pixels look near the mirror direction; fusing without them",
-                     dropped)
-            kept_points, kept_normals, stats = fuse(maps, poses, dense.sources, conf.patchmatch)
+        pm_conf = conf.patchmatch
+        if (surface is not None and light_offset is not None
+                and (pm_conf.mirror_deg or pm_conf.bright_ratio)):
+            # fuse again without the pixels that saw a highlight
+            maps, dropped = dense.maps, {}
+            if pm_conf.mirror_deg:
+                maps, dropped["near_mirror_pixels"] = without_near_mirror(
+                    maps, poses, light_offset, surface, pm_conf.mirror_deg)
+            if pm_conf.bright_ratio:
+                views = sorted(maps)
+                small, small_masks, _ = working_images(grey, masks, intrinsics, views, pm_conf)
+                reach = (pm_conf.window // 2) * pm_conf.window_step
+                maps, dropped["bright_pixels"] = without_bright(
+                    maps, small, small_masks, poses, light_offset, surface,
+                    pm_conf.bright_ratio, reach)
+                del small, small_masks
+            log.info("PatchMatch: leaving out %s; fusing again",
+                     ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in dropped.items()))
+            kept_points, kept_normals, stats = fuse(maps, poses, dense.sources, pm_conf)
             second, second_info = stereo_surface(
-                DenseResult(kept_points, kept_normals, stats | {"near_mirror_pixels": dropped},
-                            maps, dense.sources))
+                DenseResult(kept_points, kept_normals, stats | dropped, maps, dense.sources))
             if second is not None:
                 surface, stereo_info = second, second_info
         info |= stereo_info

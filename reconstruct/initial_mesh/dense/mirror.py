@@ -38,14 +38,14 @@ MIN_VIEWS = 24
 AVERAGE_FRACTION = 1 / 24
 
 
-def averaged_face_normals(surface: trimesh.Trimesh, radius: float) -> np.ndarray:
-    """The face normals (F, 3) of ``surface``'s vertex normals averaged over about ``radius``
-    (metres): repeated 1-ring means, a diffusion whose reach grows as the edge length times
-    the square root of the number of steps.
+def averaged_vertex_normals(surface: trimesh.Trimesh, radius: float) -> np.ndarray:
+    """The vertex normals (V, 3) of ``surface`` averaged over about ``radius`` (metres):
+    repeated 1-ring means, a diffusion whose reach grows as the edge length times the square
+    root of the number of steps.
 
     >>> sphere = trimesh.creation.icosphere(subdivisions=3)
-    >>> n = averaged_face_normals(sphere, 0.3)
-    >>> bool(np.all(np.einsum("ij,ij->i", n, sphere.face_normals) > 0.99))
+    >>> n = averaged_vertex_normals(sphere, 0.3)
+    >>> bool(np.all(np.einsum("ij,ij->i", n, sphere.vertex_normals) > 0.99))
     True
     """
     edge = float(np.mean(surface.edges_unique_length))
@@ -54,7 +54,18 @@ def averaged_face_normals(surface: trimesh.Trimesh, radius: float) -> np.ndarray
     normals = np.array(surface.vertex_normals, dtype=float)
     for _ in range(steps):
         normals = ring_mean @ normals
-    face = normals[np.asarray(surface.faces)].sum(axis=1)
+    return normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
+def face_normals_of(surface: trimesh.Trimesh, vertex_normals: np.ndarray) -> np.ndarray:
+    """Unit face normals (F, 3): the mean of each face's corners' ``vertex_normals`` (V, 3).
+
+    >>> sphere = trimesh.creation.icosphere(subdivisions=3)
+    >>> n = face_normals_of(sphere, averaged_vertex_normals(sphere, 0.3))
+    >>> bool(np.all(np.einsum("ij,ij->i", n, sphere.face_normals) > 0.99))
+    True
+    """
+    face = vertex_normals[np.asarray(surface.faces)].sum(axis=1)
     return face / np.linalg.norm(face, axis=1, keepdims=True)
 
 
@@ -75,7 +86,7 @@ def without_near_mirror(
     normals = [np.asarray(surface.face_normals)]
     if average_fraction > 0:
         radius = average_fraction * float(max(surface.extents))
-        normals.append(averaged_face_normals(surface, radius))
+        normals.append(face_normals_of(surface, averaged_vertex_normals(surface, radius)))
     limit = np.radians(max_deg)
     out: dict[int, ViewDepth] = {}
     dropped = 0

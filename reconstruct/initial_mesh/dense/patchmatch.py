@@ -60,6 +60,10 @@ class PatchMatchConfig:
     normal lies within this angle of the lamp's mirror direction are left out of a second
     fusion (:mod:`reconstruct.initial_mesh.dense.mirror`; 0: fuse once; unset: 20 when the
     optimiser is told the object is glossy and there are at least 24 views, else 0);
+    ``bright_ratio``: pixels brighter than this many times the median, over the views that see
+    their point, of that point's brightness over its shading are left out of that fusion too
+    (:mod:`reconstruct.initial_mesh.dense.bright_pixels`; 0 or unset: none; it needs
+    the first surface, so it runs with a ``mirror_deg`` of 0 too);
     ``seed``: random hypotheses."""
 
     scale: float | None = bounded(None, above=0.0, max=1.0)
@@ -77,6 +81,7 @@ class PatchMatchConfig:
     consistency_depth: float = bounded(0.005, min=0.0, max=1.0)
     min_consistent: int = bounded(2, min=1, max=64)
     mirror_deg: float | None = bounded(None, min=0.0, max=90.0)
+    bright_ratio: float | None = bounded(None, min=0.0, max=100.0)
     # planes seen more obliquely than this are not proposed
     max_normal_deg: float = bounded(80.0, above=0.0, max=90.0)
     poisson_depth: int = bounded(9, min=1, max=14)
@@ -330,11 +335,7 @@ def patchmatch_points(
     span = conf.depth_range * float(np.ptp(hull_vertices, axis=0).max())
     views = sorted(v for v in masks if v in poses)
     srcs = source_views({v: poses[v] for v in views}, hull_vertices.mean(0), conf.sources)
-    pinhole = {v: undistorted(images[v], masks[v], intrinsics[v]) for v in views}
-    scale = DEFAULT_SCALE if conf.scale is None else conf.scale
-    small = {v: _resize(pinhole[v][0], scale) for v in views}
-    small_masks = {v: _resize(pinhole[v][1].astype(np.float32), scale) > 0.5 for v in views}
-    intr_s = {v: scaled(pinhole[v][2], scale) for v in views}
+    small, small_masks, intr_s = working_images(images, masks, intrinsics, views, conf)
     maps: dict[int, ViewDepth] = {}
     for i, v in enumerate(views):
         sources = [(small[o], intr_s[o], poses[o]) for o in srcs[v]]
@@ -344,6 +345,22 @@ def patchmatch_points(
             progress(i + 1, len(views))
     points, normals, stats = fuse(maps, poses, srcs, conf)
     return DenseResult(points, normals, stats, maps, srcs)
+
+
+def working_images(
+    images: dict[int, np.ndarray],
+    masks: dict[int, np.ndarray],
+    intrinsics: dict[int, Intrinsics],
+    views: list[int],
+    conf: PatchMatchConfig,
+) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray], dict[int, Intrinsics]]:
+    """The ``views``' images (H, W, C), masks and pinhole intrinsics as PatchMatch matches
+    them: undistorted and resized to the working scale."""
+    pinhole = {v: undistorted(images[v], masks[v], intrinsics[v]) for v in views}
+    scale = DEFAULT_SCALE if conf.scale is None else conf.scale
+    small = {v: _resize(pinhole[v][0], scale) for v in views}
+    small_masks = {v: _resize(pinhole[v][1].astype(np.float32), scale) > 0.5 for v in views}
+    return small, small_masks, {v: scaled(pinhole[v][2], scale) for v in views}
 
 
 def undistorted(

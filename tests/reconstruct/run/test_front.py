@@ -142,8 +142,7 @@ def test_patchmatch_recovers_a_concavity_the_hull_cannot(tmp_path: Path) -> None
     info = json.loads((result.recon_dir / "mesh" / "initial.json").read_text())
     assert "near_mirror_pixels" not in info  # a matte object is fused once
     # a glossy one, declared so, seen from 12 views is fused once too: the dent, seen head-on,
-    # keeps its gain; the second fusion without the pixels that saw the lamp (at the lens)
-    # mirrored runs when the config asks for it
+    # keeps its gain; the second fusion, without the highlights, runs when the config asks
     glossy = build_session(tmp_path / "glossy", views=12, illuminations=("white",),
                            size=(200, 150), mesh=truth, gloss=0.04)
     result = run_front(glossy, {"mesh": {"voxels": 64}}, glossy=True)
@@ -153,10 +152,11 @@ def test_patchmatch_recovers_a_concavity_the_hull_cannot(tmp_path: Path) -> None
     distance = np.abs(trimesh.proximity.signed_distance(truth, points))
     print(f"glossy, fused once: {distance[points[:, 0] > 0.06].mean() * 1e3:.2f} mm")
     assert distance[points[:, 0] > 0.06].mean() < 0.5 * errors["visual_hull"]
-    result = run_front(glossy, {"mesh": {"voxels": 64, "patchmatch": {"mirror_deg": 20}}},
-                       glossy=True)
+    both = {"mirror_deg": 20, "bright_ratio": 1.5}
+    result = run_front(glossy, {"mesh": {"voxels": 64, "patchmatch": both}}, glossy=True)
     info = json.loads((result.recon_dir / "mesh" / "initial.json").read_text())
     assert info["near_mirror_pixels"] > 0
+    assert info["bright_pixels"] > 0
 
 
 @pytest.mark.parametrize(
