@@ -97,12 +97,12 @@ def without_bright(
     average_fraction: float = AVERAGE_FRACTION,
 ) -> tuple[dict[int, ViewDepth], int]:
     """Each view's depth map with the pixels dropped (NaN) whose brightness over shading
-    exceeds ``ratio`` times the diffuse level (:func:`diffuse_levels`) of the point where
-    their ray meets ``surface``, and those within ``reach_px`` pixels of one, and how many
-    pixels were dropped. ``images`` (H, W, C) and ``masks`` are the views as PatchMatch
-    matched them, at the depth maps' scale; ``light_offset`` is the lamp in the camera frame
-    (metres). Pixels whose ray misses ``surface``, whose point has no level or is lit at a
-    grazing angle are kept."""
+    exceeds ``ratio`` times the brightest diffuse level (:func:`diffuse_levels`) on and
+    around the face of ``surface`` their ray meets, and those within ``reach_px`` pixels of
+    one, and how many pixels were dropped. ``images`` (H, W, C) and ``masks`` are the views
+    as PatchMatch matched them, at the depth maps' scale; ``light_offset`` is the lamp in the
+    camera frame (metres). Pixels whose ray misses ``surface``, whose point has no level or
+    is lit at a grazing angle are kept."""
     radius = average_fraction * float(max(surface.extents))
     normals = averaged_vertex_normals(surface, radius)
     levels = diffuse_levels(surface, normals, images, masks, maps, poses, light_offset)
