@@ -29,6 +29,7 @@ from reconstruct.initial_mesh.dense.mirror import (
     AVERAGE_FRACTION,
     averaged_vertex_normals,
     face_normals_of,
+    surface_hits,
 )
 from reconstruct.initial_mesh.dense.patchmatch import ViewDepth
 from reconstruct.model.camera import Pose, project
@@ -56,14 +57,15 @@ def diffuse_levels(
     maps: Mapping[int, ViewDepth],
     poses: Mapping[int, Pose],
     light_offset: np.ndarray,
+    caster: RayCaster | None = None,
 ) -> np.ndarray:
     """Per vertex of ``surface`` (V,): the median over the views that see it of its
     brightness (the sum of a view's channels, bilinear at its projection) divided by its
     shading under that view's lamp; NaN where fewer than :data:`MIN_LEVEL_VIEWS` views see
     it. ``normals`` (V, 3) are the vertices' (averaged) unit normals; a view's reading counts
     only inside its ``masks`` (H, W) bool and a pixel away from its silhouette's edge, where
-    the bilinear taps would blend in the background."""
-    caster = RayCaster(np.asarray(surface.vertices), np.asarray(surface.faces))
+    the bilinear taps would blend in the background. ``caster``: ``surface``'s, if built."""
+    caster = caster or RayCaster(np.asarray(surface.vertices), np.asarray(surface.faces))
     points = np.asarray(surface.vertices, dtype=float)
     views = sorted(maps)
     levels = np.full((len(points), len(views)), np.nan)
@@ -105,8 +107,9 @@ def without_bright(
     is lit at a grazing angle are kept."""
     radius = average_fraction * float(max(surface.extents))
     normals = averaged_vertex_normals(surface, radius)
-    levels = diffuse_levels(surface, normals, images, masks, maps, poses, light_offset)
     faces = np.asarray(surface.faces)
+    caster = RayCaster(np.asarray(surface.vertices), faces)
+    levels = diffuse_levels(surface, normals, images, masks, maps, poses, light_offset, caster)
     # the brightest level among the corners and their neighbours: beside an edge of the paint
     # a pixel and the levels read there each mix the two paints in their own proportions
     nearby = levels.copy()
@@ -115,24 +118,19 @@ def without_bright(
     np.fmax.at(nearby, edges[:, 1], levels[edges[:, 0]])
     face_level = np.max(nearby[faces], axis=1)
     face_normal = face_normals_of(surface, normals)
-    caster = RayCaster(np.asarray(surface.vertices), faces)
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach_px + 1,) * 2)
     out: dict[int, ViewDepth] = {}
     dropped = 0
     for view, vd in maps.items():
-        rows, cols = np.nonzero(np.isfinite(vd.distance))
         pose = poses[view]
-        rays = vd.intrinsics.pixel_rays(np.stack([cols + 0.5, rows + 0.5], 1)) @ pose.R
-        tri, distance, _ = caster.first_hit(np.broadcast_to(pose.center, rays.shape), rays)
-        hit = np.flatnonzero(tri >= 0)
-        points = pose.center + rays[hit] * distance[hit, None]
+        rows, cols, tri, points = surface_hits(vd, pose, caster)
         light = pose.light_position(light_offset)
-        s = shading(points, face_normal[tri[hit]], light)
-        bright = images[view].sum(axis=2)[rows[hit], cols[hit]]
+        s = shading(points, face_normal[tri], light)
+        bright = images[view].sum(axis=2)[rows, cols]
         with np.errstate(invalid="ignore"):
-            over = (bright > ratio * face_level[tri[hit]] * s) & lit(s, points, light)
+            over = (bright > ratio * face_level[tri] * s) & lit(s, points, light)
         bright_mask = np.zeros(vd.distance.shape, np.uint8)
-        bright_mask[rows[hit][over], cols[hit][over]] = 1
+        bright_mask[rows[over], cols[over]] = 1
         dropped_here = cv2.dilate(bright_mask, kernel) if reach_px else bright_mask
         depth = np.where(dropped_here.astype(bool), np.nan, vd.distance)
         dropped += int(np.isfinite(vd.distance).sum() - np.isfinite(depth).sum())

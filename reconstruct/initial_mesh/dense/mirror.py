@@ -69,6 +69,18 @@ def face_normals_of(surface: trimesh.Trimesh, vertex_normals: np.ndarray) -> np.
     return face / np.linalg.norm(face, axis=1, keepdims=True)
 
 
+def surface_hits(
+    vd: ViewDepth, pose: Pose, caster: RayCaster
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The rows, columns, hit faces and world points (M, 3) of a depth map's finite pixels
+    whose rays meet the surface ``caster`` holds."""
+    rows, cols = np.nonzero(np.isfinite(vd.distance))
+    rays = vd.intrinsics.pixel_rays(np.stack([cols + 0.5, rows + 0.5], 1)) @ pose.R
+    tri, distance, _ = caster.first_hit(np.broadcast_to(pose.center, rays.shape), rays)
+    hit = tri >= 0
+    return rows[hit], cols[hit], tri[hit], pose.center + rays[hit] * distance[hit, None]
+
+
 def without_near_mirror(
     maps: Mapping[int, ViewDepth],
     poses: Mapping[int, Pose],
@@ -91,20 +103,16 @@ def without_near_mirror(
     out: dict[int, ViewDepth] = {}
     dropped = 0
     for view, vd in maps.items():
-        rows, cols = np.nonzero(np.isfinite(vd.distance))
         pose = poses[view]
-        rays = vd.intrinsics.pixel_rays(np.stack([cols + 0.5, rows + 0.5], 1)) @ pose.R
-        tri, distance, _ = caster.first_hit(np.broadcast_to(pose.center, rays.shape), rays)
-        hit = tri >= 0
-        points = pose.center + rays[hit] * distance[hit, None]
+        rows, cols, tri, points = surface_hits(vd, pose, caster)
         n = len(points)
         lights = np.broadcast_to(pose.light_position(light_offset), (n, 3))
         cameras = np.broadcast_to(pose.center, (n, 3))
         near = np.zeros(n, dtype=bool)
         for face_normals in normals:
-            near |= half_angles(points, face_normals[tri[hit]], lights, cameras) < limit
+            near |= half_angles(points, face_normals[tri], lights, cameras) < limit
         depth = vd.distance.copy()
-        depth[rows[hit][near], cols[hit][near]] = np.nan
+        depth[rows[near], cols[near]] = np.nan
         dropped += int(near.sum())
         out[view] = replace(vd, distance=depth)
     return out, dropped
