@@ -30,6 +30,7 @@ from reconstruct.geometry import subdivide, visibility
 from reconstruct.geometry.subdivide import SubdivideConfig
 from reconstruct.geometry.visibility import Visibility, VisibilityConfig
 from reconstruct.initial_mesh import stage as initial_mesh
+from reconstruct.initial_mesh.dense.bright_pixels import GLOSSY_BRIGHT_RATIO
 from reconstruct.initial_mesh.dense.mirror import GLOSSY_MIRROR_DEG, MIN_VIEWS
 from reconstruct.initial_mesh.dense.poisson import read_mesh
 from reconstruct.initial_mesh.procam import (
@@ -163,18 +164,22 @@ def _patchmatch_scale(conf: MeshConfig, levels: StageLevels) -> MeshConfig:
     return replace(conf, patchmatch=replace(conf.patchmatch, scale=levels.patchmatch_scale))
 
 
-def _mirror(conf: MeshConfig, glossy: bool, views: int) -> MeshConfig:
-    """Highlights left out of fusion on an object declared glossy and seen from enough views,
-    unless the config names the angle."""
-    if conf.patchmatch.mirror_deg is not None:
-        return conf
+def _highlight_passes(conf: MeshConfig, glossy: bool, views: int) -> MeshConfig:
+    """Highlights left out of fusion, by their normals and by their brightness, on an object
+    declared glossy and seen from enough views, unless the config names the angle or ratio."""
+    pm = conf.patchmatch
     leave_out = glossy and views >= MIN_VIEWS
-    if glossy and not leave_out:
+    if glossy and not leave_out and pm.mirror_deg is None:
         log.info("glossy object seen from %d views: highlights stay in fusion (below %d views "
                  "leaving them out costs more than they do; mesh.patchmatch.mirror_deg forces it)",
                  views, MIN_VIEWS)
     angle = GLOSSY_MIRROR_DEG if leave_out else 0.0
-    return replace(conf, patchmatch=replace(conf.patchmatch, mirror_deg=angle))
+    ratio = GLOSSY_BRIGHT_RATIO if leave_out else 0.0
+    return replace(conf, patchmatch=replace(
+        pm,
+        mirror_deg=angle if pm.mirror_deg is None else pm.mirror_deg,
+        bright_ratio=ratio if pm.bright_ratio is None else pm.bright_ratio,
+    ))
 
 
 def run_front(
@@ -218,7 +223,8 @@ def run_front(
             else:
                 mesh_conf = _mesh_config(conf.mesh, session, posed.summary)
                 mesh0 = initial_mesh.run(
-                    _mirror(_patchmatch_scale(mesh_conf, levels), glossy, len(posed.poses)),
+                    _highlight_passes(_patchmatch_scale(mesh_conf, levels), glossy,
+                                      len(posed.poses)),
                     dirs["decoded"],
                     dirs["poses"], dirs["mesh"], initial_mesh_file, posed,
                     # the paper's start where the profile names no mount: the lamp at the lens

@@ -60,10 +60,11 @@ class PatchMatchConfig:
     normal lies within this angle of the lamp's mirror direction are left out of a second
     fusion (:mod:`reconstruct.initial_mesh.dense.mirror`; 0: fuse once; unset: 20 when the
     optimiser is told the object is glossy and there are at least 24 views, else 0);
-    ``bright_ratio``: pixels brighter than this many times the median, over the views that see
-    their point, of that point's brightness over its shading are left out of that fusion too
-    (:mod:`reconstruct.initial_mesh.dense.bright_pixels`; 0 or unset: none; it needs
-    the first surface, so it runs with a ``mirror_deg`` of 0 too);
+    ``bright_ratio``: pixels brighter than this many times what their point's albedo and
+    normal, fitted to its brightness in the views that see it, predict are left out of that
+    fusion too (:mod:`reconstruct.initial_mesh.dense.bright_pixels`; 0: none; unset: 1.2
+    where ``mirror_deg`` is 20 by default, else 0; it needs the first surface, so it runs with
+    a ``mirror_deg`` of 0 too);
     ``seed``: random hypotheses."""
 
     scale: float | None = bounded(None, above=0.0, max=1.0)

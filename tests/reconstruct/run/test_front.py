@@ -14,12 +14,13 @@ from front_synthetic import RADIUS, build_session, dented_sphere
 
 from core.errors import RigError
 from reconstruct.geometry.subdivide import sqrt3_step
+from reconstruct.initial_mesh.dense.bright_pixels import GLOSSY_BRIGHT_RATIO
 from reconstruct.initial_mesh.dense.mirror import GLOSSY_MIRROR_DEG, MIN_VIEWS
 from reconstruct.initial_mesh.dense.patchmatch import PatchMatchConfig
 from reconstruct.initial_mesh.dense.poisson import read_mesh
 from reconstruct.initial_mesh.repair import defects
 from reconstruct.initial_mesh.stage import MeshConfig
-from reconstruct.run.front import FrontConfig, _mirror, run_front
+from reconstruct.run.front import FrontConfig, _highlight_passes, run_front
 
 FAST = {"mesh": {"voxels": 64}}
 
@@ -152,7 +153,7 @@ def test_patchmatch_recovers_a_concavity_the_hull_cannot(tmp_path: Path) -> None
     distance = np.abs(trimesh.proximity.signed_distance(truth, points))
     print(f"glossy, fused once: {distance[points[:, 0] > 0.06].mean() * 1e3:.2f} mm")
     assert distance[points[:, 0] > 0.06].mean() < 0.5 * errors["visual_hull"]
-    both = {"mirror_deg": 20, "bright_ratio": 1.5}
+    both = {"mirror_deg": 20, "bright_ratio": 1.2}
     result = run_front(glossy, {"mesh": {"voxels": 64, "patchmatch": both}}, glossy=True)
     info = json.loads((result.recon_dir / "mesh" / "initial.json").read_text())
     assert info["near_mirror_pixels"] > 0
@@ -160,15 +161,21 @@ def test_patchmatch_recovers_a_concavity_the_hull_cannot(tmp_path: Path) -> None
 
 
 @pytest.mark.parametrize(
-    ("glossy", "views", "named", "angle"),
-    [(True, 40, None, GLOSSY_MIRROR_DEG), (True, MIN_VIEWS - 1, None, 0.0),
-     (False, 40, None, 0.0), (True, 12, 15.0, 15.0), (False, 40, 15.0, 15.0)],
+    ("glossy", "views", "named", "expected"),
+    [(True, 40, (None, None), (GLOSSY_MIRROR_DEG, GLOSSY_BRIGHT_RATIO)),
+     (True, MIN_VIEWS - 1, (None, None), (0.0, 0.0)),
+     (False, 40, (None, None), (0.0, 0.0)),
+     (True, 12, (15.0, 1.5), (15.0, 1.5)),
+     (False, 40, (15.0, None), (15.0, 0.0)),
+     (True, 40, (None, 0.0), (GLOSSY_MIRROR_DEG, 0.0))],
 )
 def test_highlights_are_left_out_of_fusion_on_glossy_objects_seen_from_enough_views(
-    glossy: bool, views: int, named: float | None, angle: float
+    glossy: bool, views: int, named: tuple[float | None, float | None],
+    expected: tuple[float, float],
 ) -> None:
-    conf = MeshConfig(patchmatch=PatchMatchConfig(mirror_deg=named))
-    assert _mirror(conf, glossy, views).patchmatch.mirror_deg == angle
+    conf = MeshConfig(patchmatch=PatchMatchConfig(mirror_deg=named[0], bright_ratio=named[1]))
+    pm = _highlight_passes(conf, glossy, views).patchmatch
+    assert (pm.mirror_deg, pm.bright_ratio) == expected
 
 
 @pytest.mark.parametrize(
