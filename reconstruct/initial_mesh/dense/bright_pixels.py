@@ -40,8 +40,8 @@ from reconstruct.model.camera import Pose, project
 from reconstruct.model.forward import shading
 from reconstruct.model.raycast import RayCaster
 
-# the ratio a glossy object's pixels are judged at (bench/README.md: every scene measured gained
-# or held, the ideal-optics one included)
+# the ratio a glossy object's pixels are judged at: above the fit's noise and a lobe's flanks
+# (bench/README.md, "Highlights found by a photometric fit")
 GLOSSY_BRIGHT_RATIO = 1.2
 # readings a vertex's fit needs: one more than its three unknowns, so that a reading left over
 # can disagree
@@ -56,7 +56,7 @@ REFITS = 3
 # the least shading, relative to head-on at the same distance, a pixel is judged at
 # (grazing: the brightness is mostly noise and the normal's error)
 MIN_COS = 0.2
-# vertices fitted at once (bounds the fit's float64 copies: about 1.3 kB a vertex at 40 views)
+# vertices fitted at once (bounds the fit's float64 working copies of the readings)
 FIT_BLOCK = 65536
 
 
@@ -121,8 +121,9 @@ def _least_squares(
     gram = np.einsum("vk,vki,vkj->vij", use, vectors, vectors)
     # scaled, so that the regularising ridge is the same at any distance
     scale = np.trace(gram, axis1=1, axis2=2)[:, None, None] / 3 + 1e-30
+    gram = gram / scale
     rhs = np.einsum("vk,vk,vki->vi", use, brightness, vectors)[..., None] / scale
-    return np.linalg.solve(gram / scale + 1e-9 * np.eye(3), rhs)[..., 0], gram / scale
+    return np.linalg.solve(gram + 1e-9 * np.eye(3), rhs)[..., 0], gram
 
 
 def fit_albedo_normals(

@@ -69,11 +69,11 @@ class Ring:
         caster = RayCaster(np.asarray(self.sphere.vertices), np.asarray(self.sphere.faces))
         intr = Intrinsics.pinhole(SIZE, SIZE, 370.0)
         self.images, self.maps, self.poses, self.angles, self.inside = {}, {}, {}, {}, {}
+        steps = [(deg, height) for height in (-0.15, 0.15) for deg in degrees]
         # views with others on both sides: from the sweep's ends a highlight looks like the
         # normal tilted towards the last view
-        self.inner = [view for view, deg in enumerate(list(degrees) * 2)
+        self.inner = [view for view, (deg, _) in enumerate(steps)
                       if min(degrees) < deg < max(degrees)]
-        steps = [(deg, height) for height in (-0.15, 0.15) for deg in degrees]
         for view, (deg, height) in enumerate(steps):
             a = np.radians(deg)
             eye = np.array([0.5 * np.sin(a), height, 0.5 * np.cos(a)])
@@ -108,7 +108,7 @@ def test_the_fit_is_albedo_times_normal_whatever_the_highlights(ring: Ring) -> N
     expected = 1.5 * _albedo(np.asarray(ring.sphere.vertices))[:, None] * true_normals
     error = np.linalg.norm(fit - expected, axis=1) / np.linalg.norm(expected, axis=1)
     assert np.median(error[fitted]) < 0.01
-    # the highlights are left out of the fit (kept in, they put it off by 80 % at the peaks)
+    # the highlights are left out of the fit, so it holds at their peaks too
     highlighted = np.isin(np.arange(len(fit)), _peaks(ring)) & fitted
     assert highlighted.sum() > 10
     assert np.median(error[highlighted]) < 0.03
