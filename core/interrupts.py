@@ -1,30 +1,31 @@
 """SIGINT and SIGTERM for `rig`, from a command's first instant to its exit: the first one
 raises :class:`Interrupted` (a KeyboardInterrupt, so running code saves its state as for
 Ctrl-C) and the command exits 128 + its number with one line; later ones are noted, never
-raised, so the state being saved is not cut short. A stop that code swallowed (a library or an
-extension module's init that clears every error) is raised again at the command's next log
-line. Outside a command (start-up, exit) a signal ends the process at once with the same status
-and line.
+raised, so the state being saved is not cut short. A stop that code swallowed (a library that
+clears every error) is raised again at the command's next log line; compiled modules load with
+both signals held back. Outside a command (start-up, exit) a signal ends the process at once
+with the same status and line. A stopped command's process ends without tearing the
+interpreter down.
 
 Imports only the standard library: it is installed before anything heavy is imported.
 """
 
 from __future__ import annotations
 
+import atexit
 import importlib.machinery
 import logging
 import os
 import signal
 import sys
 import threading
-from collections.abc import Callable, Sequence
-from types import FrameType, ModuleType
-from typing import Any
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from types import CodeType, FrameType, ModuleType, TracebackType
+from typing import Any, NoReturn
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
-# pycolmap's glog replaces the SIGTERM handler natively when this module loads, to print a
-# stack dump; both signals wait while it loads and the handlers are put back before they land.
-NATIVE_HANDLER_MODULES = frozenset({"pycolmap._core"})
 
 Handler = Callable[[int, FrameType | None], Any] | int | None
 
@@ -78,6 +79,9 @@ def note(signum: int) -> None:
 def _handle(signum: int, frame: FrameType | None) -> None:
     if _state.first is not None:
         return  # already stopping
+    if _inside_a_hook(frame):  # raised there it could not leave the hook: once it has left
+        _send_again(signum)
+        return
     _state.first = signum
     if _state.raising:
         _state.raised = True
@@ -105,15 +109,34 @@ def raised_by_a_stop(error: BaseException | None) -> bool:
     return False
 
 
+def was_stopped() -> bool:
+    """Whether the last command was stopped and said so (:func:`mark_stopped`)."""
+    return _state.stopped
+
+
+def exit_stopped(status: int) -> NoReturn:
+    """End the process of a stopped command: the exit functions run (logs flushed, temporary
+    folders and worker processes cleaned up) but the interpreter is not torn down. A library
+    the stop cut short while it loaded can crash freeing its half-built state in that teardown
+    (an extension's objects freed with no thread state: SIGABRT after the stop line)."""
+    atexit._run_exitfuncs()
+    _flush_std_streams()
+    os._exit(status)
+
+
 def _exit_now(signum: int) -> None:
     """Nothing is running that could save state: flush what was printed, say why, exit."""
+    _flush_std_streams()
+    os.write(2, (stop_line(signum) + "\n").encode())
+    os._exit(exit_status(signum))
+
+
+def _flush_std_streams() -> None:
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
-        except Exception:  # a stream closed or in the middle of a write: the line still goes
+        except Exception:  # a stream closed or in the middle of a write: what follows still goes
             pass
-    os.write(2, (stop_line(signum) + "\n").encode())
-    os._exit(exit_status(signum))
 
 
 def _in_main_thread() -> bool:
@@ -161,6 +184,71 @@ def _reraise_logged_stops() -> None:
     logging.setLogRecordFactory(factory)
 
 
+# the code of the hooks that take a stop Python cannot propagate (and send it again)
+_HOOK_CODES: set[CodeType] = set()
+RESEND_POLL_S = 0.005
+
+
+def _inside_a_hook(frame: FrameType | None) -> bool:
+    while frame is not None:
+        if frame.f_code in _HOOK_CODES:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _main_thread_inside_a_hook() -> bool:
+    return _inside_a_hook(sys._current_frames().get(threading.main_thread().ident or 0))
+
+
+def _send_again(
+    signum: int,
+    state: _State = _state,
+    thread: type[threading.Thread] = threading.Thread,
+    busy: Callable[[], bool] = _main_thread_inside_a_hook,
+    sleep: Callable[[float], None] = time.sleep,
+    kill: Callable[[int, int], None] = os.kill,
+    getpid: Callable[[], int] = os.getpid,
+) -> None:
+    """Send ``signum`` once more, so a stop a hook had to swallow is raised again outside it:
+    from another thread, once the main thread has left the hook (a signal handled inside it
+    could not leave it either). Defaults, not globals: hooks run at interpreter exit too, after
+    module globals go."""
+    state.first = None
+
+    def deliver() -> None:
+        while busy():
+            sleep(RESEND_POLL_S)
+        kill(getpid(), signum)
+
+    thread(target=deliver, name="stop again", daemon=True).start()
+
+
+def _redeliver_printed_stops() -> None:
+    """C code that reports an error by printing it and goes on (``PyErr_Print``: an extension
+    importing a module lazily, which the stop cut short) would print the stop's traceback and
+    drop the stop: send the signal again instead, as for a finaliser."""
+    if getattr(sys.excepthook, "redelivers_stops", False):
+        return
+    previous = sys.excepthook
+
+    def hook(
+        kind: type[BaseException],
+        error: BaseException,
+        traceback: TracebackType | None,
+        stop: type[Interrupted] = Interrupted,
+        send_again: Callable[[int], None] = _send_again,
+    ) -> None:
+        if isinstance(error, stop):
+            send_again(error.signum)
+            return
+        previous(kind, error, traceback)
+
+    hook.redelivers_stops = True  # type: ignore[attr-defined]
+    _HOOK_CODES.add(hook.__code__)
+    sys.excepthook = hook
+
+
 def _redeliver_unraisable_stops() -> None:
     """A stop raised inside a finaliser or weakref callback (run by the garbage collector
     anywhere) cannot propagate and would print "Exception ignored": send the signal again,
@@ -176,15 +264,10 @@ def _redeliver_unraisable_stops() -> None:
         unraisable: Any,
         state: _State = _state,
         stop: type[Interrupted] = Interrupted,
-        kill: Callable[[int, int], None] = os.kill,
+        send_again: Callable[[int], None] = _send_again,
     ) -> None:
         if isinstance(unraisable.exc_value, stop):
-            state.first = None
-            # from another thread, a moment later: a signal raised here would be handled
-            # inside this hook, where it cannot propagate either
-            again = threading.Timer(0.01, kill, (os.getpid(), unraisable.exc_value.signum))
-            again.daemon = True
-            again.start()
+            send_again(unraisable.exc_value.signum)
             return
         if state.first is not None or state.stopped:
             try:
@@ -202,6 +285,7 @@ def _redeliver_unraisable_stops() -> None:
         previous(unraisable)
 
     hook.redelivers_stops = True  # type: ignore[attr-defined]
+    _HOOK_CODES.add(hook.__code__)
     sys.unraisablehook = hook
 
 
@@ -218,43 +302,49 @@ def install(*, raising: bool = True) -> None:
     _set_handlers()
     _reraise_logged_stops()
     _redeliver_unraisable_stops()
-    _reinstall_after_native_imports()
+    _redeliver_printed_stops()
+    _shield_extension_loads()
     signal.pthread_sigmask(signal.SIG_UNBLOCK, SIGNALS)
 
 
-class _ReinstallAfter:
-    """A finder on ``sys.meta_path`` that loads a module that replaces the handlers natively
-    with both signals blocked and puts the handlers back before unblocking them, so a signal
-    sent while it loads is taken by rig's handler, never by the module's."""
+class _ShieldedExtensionLoader(importlib.machinery.ExtensionFileLoader):
+    """Loads a compiled module with both signals blocked in the loading thread and rig's
+    handlers put back before they are unblocked. Threads the module starts as it loads
+    (OpenBLAS's pool) inherit the block, so the kernel never hands them a stop; a handler it
+    installs natively (pycolmap's glog: a stack dump on SIGTERM) never sees one; and its init,
+    which cannot take an exception raised into the Python it calls (numpy's ``import_array``
+    prints it and fails), is never cut short. A signal sent meanwhile waits for the load."""
 
-    def find_spec(
-        self, fullname: str, path: Sequence[str] | None, target: ModuleType | None = None
-    ) -> importlib.machinery.ModuleSpec | None:
-        if fullname not in NATIVE_HANDLER_MODULES:
-            return None
-        spec = importlib.machinery.PathFinder.find_spec(fullname, path, target)
-        if spec is None or spec.loader is None:
-            return spec
-        exec_module = spec.loader.exec_module
+    def create_module(self, spec: importlib.machinery.ModuleSpec) -> ModuleType:
+        with _signals_held():
+            return super().create_module(spec)
 
-        def exec_then_reinstall(module: ModuleType) -> None:
-            main = _in_main_thread()
-            mask = signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS) if main else None
-            try:
-                exec_module(module)
-            finally:
-                if main and signal.getsignal(signal.SIGTERM) is _handle:
-                    _set_handlers()
-                if mask is not None:
-                    signal.pthread_sigmask(signal.SIG_SETMASK, mask)
-
-        spec.loader.exec_module = exec_then_reinstall  # type: ignore[method-assign]
-        return spec
+    def exec_module(self, module: ModuleType) -> None:
+        with _signals_held():
+            super().exec_module(module)
 
 
-_hook = _ReinstallAfter()
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS)
+    try:
+        yield
+    finally:
+        if _in_main_thread() and signal.getsignal(signal.SIGTERM) is _handle:
+            _set_handlers()
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
 
-def _reinstall_after_native_imports() -> None:
-    if _hook not in sys.meta_path:
-        sys.meta_path.insert(0, _hook)
+def _shield_extension_loads() -> None:
+    """Compiled modules found on the path from now on load through
+    :class:`_ShieldedExtensionLoader` (the finders already made are dropped)."""
+    if any(getattr(hook, "shields_extensions", False) for hook in sys.path_hooks):
+        return
+    hook = importlib.machinery.FileFinder.path_hook(
+        (_ShieldedExtensionLoader, importlib.machinery.EXTENSION_SUFFIXES),
+        (importlib.machinery.SourceFileLoader, importlib.machinery.SOURCE_SUFFIXES),
+        (importlib.machinery.SourcelessFileLoader, importlib.machinery.BYTECODE_SUFFIXES),
+    )
+    hook.shields_extensions = True  # type: ignore[attr-defined]
+    sys.path_hooks.insert(0, hook)  # a path that is no folder (a zip) goes on to the next hook
+    sys.path_importer_cache.clear()

@@ -115,9 +115,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def run() -> NoReturn:
-    """The `rig` program: a signal before the command starts or after it ends exits at once."""
+    """The `rig` program: a signal before the command starts or after it ends exits at once;
+    a stopped command's process ends once the exit functions ran (``interrupts.exit_stopped``)."""
     interrupts.install(raising=False)
-    sys.exit(main())
+    status = main()
+    if interrupts.was_stopped():
+        interrupts.exit_stopped(status)
+    sys.exit(status)
 
 
 def _run(argv: Sequence[str] | None, parsed: list[argparse.Namespace]) -> int:

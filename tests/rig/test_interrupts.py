@@ -5,11 +5,14 @@ replaced, and signals before or after the command exiting at once."""
 from __future__ import annotations
 
 import argparse
+import ctypes
 import logging
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import sysconfig
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -22,6 +25,7 @@ from rig.commands import session as session_command
 
 REPO = Path(__file__).resolve().parents[2]
 STOP_LINE = "rig: stopped by"
+KILL_SELF_WITH_SIGTERM = b"import os, signal; os.kill(os.getpid(), signal.SIGTERM)"
 
 
 def run_with(
@@ -197,6 +201,25 @@ def test_a_stop_raised_in_a_finaliser_is_delivered_again(
     assert "Exception ignored" not in err and went_on == []
 
 
+def test_a_stop_that_c_code_printed_and_cleared_is_delivered_again(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An extension reporting an error with ``PyErr_Print`` and going on (a lazy import the
+    stop cut short) neither prints the stop's traceback nor drops the stop."""
+    went_on: list[str] = []
+
+    def command(args: argparse.Namespace) -> int:
+        # C code that runs Python, prints what it raised (PyErr_Print) and returns -1
+        assert ctypes.pythonapi.PyRun_SimpleString(KILL_SELF_WITH_SIGTERM) == -1
+        for _ in range(200):  # the command goes on; the stop comes back within a moment
+            time.sleep(0.01)
+        went_on.append("after the printed stop")
+        return 0
+
+    stopped_by_sigterm(monkeypatch, capsys, command)
+    assert went_on == []
+
+
 def test_a_failure_the_signal_caused_is_reported_as_the_signal(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -268,28 +291,59 @@ def test_pycolmap_native_sigterm_handler_is_replaced() -> None:
     assert "*** Aborted" not in proc.stderr and "received by PID" not in proc.stderr
 
 
-def test_a_sigterm_while_a_native_handler_module_loads_reaches_rig(tmp_path: Path) -> None:
-    """A module that, like pycolmap's, replaces the SIGTERM handler natively as it loads, with
-    the signal sent in that very instant: rig's handler takes it, not the module's."""
-    (tmp_path / "native_like.py").write_text(
-        "import ctypes, os, signal\n"
-        "libc = ctypes.CDLL(None)\n"
-        "libc.signal.argtypes = (ctypes.c_int, ctypes.c_void_p)\n"
-        "libc.signal(signal.SIGTERM, 0)  # behind Python's back, as glog does (SIG_DFL here)\n"
-        "os.kill(os.getpid(), signal.SIGTERM)\n"
-    )
+NATIVE_LIKE_C = r"""
+#include <Python.h>
+#include <pthread.h>
+#include <signal.h>
+#include <unistd.h>
+
+static void *idle(void *unused) { for (;;) pause(); return NULL; }
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "native_like", NULL, -1, NULL};
+
+PyMODINIT_FUNC PyInit_native_like(void) {
+    pthread_t pool; /* a thread pool started as the library loads, as OpenBLAS's */
+    pthread_create(&pool, NULL, idle, NULL);
+    pthread_detach(pool);
+    signal(SIGTERM, SIG_DFL); /* a handler installed natively, as glog's (this one kills) */
+    kill(getpid(), SIGTERM);
+    usleep(50000); /* time for the kernel to hand the signal to any thread that takes it */
+    return PyModule_Create(&module);
+}
+"""
+
+
+def compiled_module(folder: Path, name: str, source: str) -> None:
+    """``name`` built from C ``source`` into ``folder`` (skips without a C compiler)."""
+    compiler = shutil.which("cc")
+    if compiler is None:
+        pytest.skip("no C compiler to build the test's extension module")
+    (folder / f"{name}.c").write_text(source)
+    target = folder / f"{name}{sysconfig.get_config_var('EXT_SUFFIX')}"
+    include = f"-I{sysconfig.get_paths()['include']}"
+    command = [compiler, "-shared", "-fPIC", "-pthread", include, f"{name}.c", "-o", target.name]
+    subprocess.run(command, cwd=folder, check=True, capture_output=True)
+
+
+def test_a_sigterm_while_a_compiled_module_loads_reaches_rig(tmp_path: Path) -> None:
+    """A compiled module that, as it loads, starts a thread, installs its own SIGTERM handler
+    natively (as pycolmap's glog does) and is sent SIGTERM in that very instant: rig's handler
+    takes it once the module has loaded, not the module's nor its thread."""
+    compiled_module(tmp_path, "native_like", NATIVE_LIKE_C)
     proc = python(
         "import sys, time\n"
         f"sys.path.insert(0, {str(tmp_path)!r})\n"
         "from core import interrupts\n"
-        "interrupts.NATIVE_HANDLER_MODULES = frozenset({'native_like'})\n"
         "interrupts.install()\n"
         "try:\n"
-        "    import native_like; time.sleep(10)\n"
+        "    import native_like\n"
+        "    time.sleep(10)\n"
         "except interrupts.Interrupted as stop:\n"
+        "    print('loaded' if 'native_like' in sys.modules else 'cut short')\n"
         "    raise SystemExit(interrupts.exit_status(stop.signum))\n"
     )
     assert proc.returncode == 143, (proc.returncode, proc.stderr)
+    assert proc.stdout == "loaded\n"
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
@@ -317,6 +371,31 @@ def test_a_signal_sent_before_the_handlers_existed_is_taken_when_they_do() -> No
     )
     assert proc.returncode == 143, proc.stderr
     assert proc.stderr == f"{STOP_LINE} SIGTERM (exit 143)\n"
+
+
+def test_a_stopped_command_ends_without_tearing_the_interpreter_down() -> None:
+    """A library the stop cut short while it loaded can crash freeing its half-built state as
+    the interpreter is torn down (once in CI: SIGABRT after the stop line). The exit
+    functions still run."""
+    proc = python(
+        "import atexit, os, signal, sys\n"
+        "from rig import cli\n"
+        "from rig.commands import session\n"
+        "class HalfBuilt:\n"
+        "    def __del__(self):  # an extension freeing what its interrupted init left\n"
+        "        os.abort()\n"
+        "def command(args):\n"
+        "    global kept\n"
+        "    kept = HalfBuilt()  # freed only as the interpreter is torn down\n"
+        "    atexit.register(print, 'exit functions ran')\n"
+        "    os.kill(os.getpid(), signal.SIGINT)\n"
+        "session.handle_info = command\n"
+        "sys.argv = ['rig', 'session', 'info', 'x']\n"
+        "cli.run()\n",
+    )
+    assert proc.returncode == 130, proc.stderr
+    one_stop_line(proc.stderr, "SIGINT", 130)
+    assert proc.stdout == "exit functions ran\n"
 
 
 def test_a_finaliser_the_stop_left_half_built_stays_off_the_terminal() -> None:
