@@ -186,6 +186,7 @@ def _reraise_logged_stops() -> None:
 
 # the code of the hooks that take a stop Python cannot propagate (and send it again)
 _HOOK_CODES: set[CodeType] = set()
+# how often a resent stop looks whether the main thread has left the hook yet
 RESEND_POLL_S = 0.005
 
 
@@ -201,27 +202,18 @@ def _main_thread_inside_a_hook() -> bool:
     return _inside_a_hook(sys._current_frames().get(threading.main_thread().ident or 0))
 
 
-def _send_again(
-    signum: int,
-    state: _State = _state,
-    thread: type[threading.Thread] = threading.Thread,
-    busy: Callable[[], bool] = _main_thread_inside_a_hook,
-    sleep: Callable[[float], None] = time.sleep,
-    kill: Callable[[int, int], None] = os.kill,
-    getpid: Callable[[], int] = os.getpid,
-) -> None:
+def _send_again(signum: int) -> None:
     """Send ``signum`` once more, so a stop a hook had to swallow is raised again outside it:
     from another thread, once the main thread has left the hook (a signal handled inside it
-    could not leave it either). Defaults, not globals: hooks run at interpreter exit too, after
-    module globals go."""
-    state.first = None
+    could not leave it either)."""
+    _state.first = None
 
     def deliver() -> None:
-        while busy():
-            sleep(RESEND_POLL_S)
-        kill(getpid(), signum)
+        while _main_thread_inside_a_hook():
+            time.sleep(RESEND_POLL_S)
+        os.kill(os.getpid(), signum)
 
-    thread(target=deliver, name="stop again", daemon=True).start()
+    threading.Thread(target=deliver, name="stop again", daemon=True).start()
 
 
 def _redeliver_printed_stops() -> None:
